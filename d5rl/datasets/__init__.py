@@ -1,0 +1,1 @@
+"""Dataset system shared by every family: on-disk format, generation, loading, export."""

@@ -1,0 +1,1 @@
+"""Environment families.  Each sub-package registers its tasks in ``registration.py``."""

@@ -1,0 +1,97 @@
+"""A small MuJoCo base env shared by every family.
+
+It owns the model/data pair, the control step (``frame_skip`` physics steps), the
+full simulator state used to store and replay datasets, and rendering.  Families
+add the task: observation, reward, termination, initial state.
+"""
+
+from __future__ import annotations
+
+from typing import Any
+
+import gymnasium as gym
+import mujoco
+import numpy as np
+
+from d5rl.rendering import make_renderer
+
+# What a dataset stores per step to replay or re-render exactly: time, qpos, qvel,
+# actuator activations, warm-start accelerations, controls, applied forces, mocap.
+STATE_SPEC = mujoco.mjtState.mjSTATE_INTEGRATION
+
+
+class MujocoEnv(gym.Env):
+    """Base class: physics, state save/restore, rendering.  Subclasses define the task."""
+
+    metadata = {"render_modes": ["rgb_array"], "render_fps": 20}
+
+    def __init__(
+        self,
+        model: mujoco.MjModel,
+        frame_skip: int,
+        render_mode: str | None = None,
+        render_size: tuple[int, int] = (240, 320),
+        render_camera: str | int = -1,
+    ):
+        if render_mode is not None and render_mode not in self.metadata["render_modes"]:
+            raise ValueError(f"render_mode must be one of {self.metadata['render_modes']}, got {render_mode!r}")
+        self.model = model
+        self.data = mujoco.MjData(model)
+        self.frame_skip = int(frame_skip)
+        self.render_mode = render_mode
+        self.render_size = tuple(render_size)
+        self.render_camera = render_camera
+        self._renderers: dict[tuple[int, int], mujoco.Renderer] = {}
+        self.metadata = {**self.metadata, "render_fps": int(round(1.0 / self.dt))}
+
+    # --- physics -----------------------------------------------------------------
+    @property
+    def dt(self) -> float:
+        """Control step in seconds."""
+        return self.model.opt.timestep * self.frame_skip
+
+    def do_simulation(self, ctrl: np.ndarray | None = None, n_steps: int | None = None) -> None:
+        if ctrl is not None:
+            self.data.ctrl[:] = ctrl
+        mujoco.mj_step(self.model, self.data, nstep=self.frame_skip if n_steps is None else n_steps)
+
+    @property
+    def state_size(self) -> int:
+        return mujoco.mj_stateSize(self.model, STATE_SPEC)
+
+    def get_state(self) -> np.ndarray:
+        """Full integration state (float64) – enough to replay or re-render this step."""
+        out = np.empty(self.state_size, dtype=np.float64)
+        mujoco.mj_getState(self.model, self.data, out, STATE_SPEC)
+        return out
+
+    def set_state(self, state: np.ndarray) -> None:
+        """Restore a state from :meth:`get_state` and recompute derived quantities."""
+        state = np.asarray(state, dtype=np.float64)
+        if state.shape != (self.state_size,):
+            raise ValueError(f"state must have shape ({self.state_size},), got {state.shape}")
+        mujoco.mj_setState(self.model, self.data, state, STATE_SPEC)
+        mujoco.mj_forward(self.model, self.data)
+
+    # --- rendering ---------------------------------------------------------------
+    def renderer(self, height: int, width: int) -> mujoco.Renderer:
+        key = (int(height), int(width))
+        if key not in self._renderers:
+            self._renderers[key] = make_renderer(self.model, *key)
+        return self._renderers[key]
+
+    def render_camera_image(self, camera: str | int, height: int, width: int, scene_option: Any = None) -> np.ndarray:
+        r = self.renderer(height, width)
+        r.update_scene(self.data, camera=camera, scene_option=scene_option)
+        return r.render()
+
+    def render(self):
+        if self.render_mode is None:
+            gym.logger.warn("render() called without render_mode; pass render_mode='rgb_array'")
+            return None
+        return self.render_camera_image(self.render_camera, *self.render_size)
+
+    def close(self) -> None:
+        for r in self._renderers.values():
+            r.close()
+        self._renderers.clear()

@@ -1,0 +1,51 @@
+"""Errors that d5rl raises for bad input or bad files.
+
+Every error says what went wrong *and what to do*.  The CLI prints them as one
+line, without a traceback; library users can catch :class:`D5RLError`.
+"""
+
+from __future__ import annotations
+
+
+class D5RLError(Exception):
+    """Base class: a problem the user can fix.  ``hint`` says how."""
+
+    def __init__(self, message: str, hint: str | None = None):
+        self.message = message
+        self.hint = hint
+        super().__init__(message if hint is None else f"{message}\n  hint: {hint}")
+
+
+class UnknownTaskError(D5RLError, KeyError):
+    """A task id that no family registers."""
+
+    def __str__(self) -> str:  # KeyError would quote the message
+        return Exception.__str__(self)
+
+
+class TaskIdError(D5RLError, ValueError):
+    """A string that does not follow the ``<family>-<name>-v<N>`` grammar."""
+
+
+class DatasetNotFoundError(D5RLError, FileNotFoundError):
+    """The dataset has not been generated (or not with enough episodes)."""
+
+
+class DatasetCorruptError(D5RLError):
+    """A dataset file is missing, truncated or fails its checksum."""
+
+
+class DatasetVersionError(D5RLError):
+    """A dataset on disk was written by another format or dataset version."""
+
+
+class MissingAssetError(D5RLError, FileNotFoundError):
+    """A robot/scene model package is not installed."""
+
+
+class RenderBackendError(D5RLError, RuntimeError):
+    """No working headless OpenGL backend."""
+
+
+class MissingDependencyError(D5RLError, ImportError):
+    """An optional dependency (an extra) is not installed."""

@@ -1,0 +1,199 @@
+"""Task ids, task specs and the global task list.
+
+One id grammar, parsed here and nowhere else::
+
+    <family>-<name>-v<version>      e.g. a1-walk-v0, kitchen-standard-mixed-v0, wx-sorting-v0
+
+Each env family registers its own tasks next to its code, in
+``d5rl/envs/<family>/registration.py``, by calling :func:`register`.  The global
+list is assembled by importing every family package's ``registration`` module,
+so adding a family never touches a central table.
+"""
+
+from __future__ import annotations
+
+import dataclasses
+import difflib
+import importlib
+import pkgutil
+import re
+from typing import Any, Callable
+
+from d5rl.errors import TaskIdError, UnknownTaskError
+
+TASK_ID_RE = re.compile(r"^(?P<family>[a-z0-9]+)-(?P<name>[a-z0-9]+(?:-[a-z0-9]+)*)-v(?P<version>\d+)$")
+
+
+@dataclasses.dataclass(frozen=True)
+class TaskId:
+    family: str
+    name: str
+    version: int
+
+    def __str__(self) -> str:
+        return f"{self.family}-{self.name}-v{self.version}"
+
+
+def parse_task_id(task_id: str) -> TaskId:
+    """Split ``a1-walk-v0`` into ``TaskId('a1', 'walk', 0)``; raise :class:`TaskIdError` if malformed."""
+    m = TASK_ID_RE.match(task_id) if isinstance(task_id, str) else None
+    if m is None:
+        raise TaskIdError(
+            f"{task_id!r} is not a task id",
+            "task ids look like 'a1-walk-v0' or 'kitchen-standard-mixed-v0'; run `d5rl list` for all of them",
+        )
+    return TaskId(m["family"], m["name"], int(m["version"]))
+
+
+@dataclasses.dataclass(frozen=True)
+class DatasetSpec:
+    """How a task's offline dataset is made.
+
+    Several tasks may share one dataset (``name``): a1-walk and a1-run use the same
+    replay buffers, and the standard kitchen tasks the same demonstrations.  A task
+    then supplies ``relabel`` to compute its own rewards from the stored data.
+    """
+
+    name: str  # directory name under $D5RL_HOME/datasets, e.g. "a1-locomotion"
+    version: int  # bump when the generated content changes (CHANGELOG line too)
+    generator: str  # "module:Class", a d5rl.datasets.generation.EpisodeGenerator
+    num_episodes: int  # full size of the dataset
+    episodes_per_shard: int = 16  # unit of work, resume and atomic write
+    generator_kwargs: dict = dataclasses.field(default_factory=dict)
+    default_seed: int = 0
+    description: str = ""
+
+
+@dataclasses.dataclass(frozen=True)
+class ScoreRef:
+    """Reference returns for normalized scores: 0 = ``random``, 1 = ``expert``."""
+
+    random: float
+    expert: float
+    source: str  # how the numbers were measured (command, episodes, seed)
+
+
+@dataclasses.dataclass(frozen=True)
+class TaskSpec:
+    id: str
+    entry_point: str  # "module:Class" of the gymnasium.Env
+    max_episode_steps: int
+    description: str
+    env_kwargs: dict = dataclasses.field(default_factory=dict)
+    dataset: DatasetSpec | None = None
+    # "module:function" mapping (TaskSpec, Dataset arrays) -> dict of replaced arrays
+    # (e.g. rewards, terminals) when this task labels a shared dataset differently.
+    relabel: str | None = None
+    score: ScoreRef | None = None
+    # How the normalized score is defined, for `d5rl info` and the docs.
+    score_definition: str = "(return - random) / (expert - random)"
+    tags: tuple[str, ...] = ()
+
+    @property
+    def parsed(self) -> TaskId:
+        return parse_task_id(self.id)
+
+    @property
+    def family(self) -> str:
+        return self.parsed.family
+
+
+_REGISTRY: dict[str, TaskSpec] = {}
+_LOADED = False
+
+
+def register(spec: TaskSpec) -> TaskSpec:
+    """Add a task (called by family ``registration`` modules at import)."""
+    parse_task_id(spec.id)
+    if spec.id in _REGISTRY and _REGISTRY[spec.id] != spec:
+        raise ValueError(f"task {spec.id} registered twice with different specs")
+    _REGISTRY[spec.id] = spec
+    _register_with_gymnasium(spec)
+    return spec
+
+
+def _register_with_gymnasium(spec: TaskSpec) -> None:
+    import gymnasium
+
+    gym_id = f"d5rl/{spec.id}"
+    if gym_id in gymnasium.registry:
+        return
+    gymnasium.register(
+        id=gym_id,
+        entry_point=spec.entry_point,
+        max_episode_steps=spec.max_episode_steps,
+        kwargs=dict(spec.env_kwargs),
+        disable_env_checker=True,
+    )
+
+
+def _load_families() -> None:
+    global _LOADED
+    if _LOADED:
+        return
+    import d5rl.envs as envs_pkg
+
+    for info in sorted(pkgutil.iter_modules(envs_pkg.__path__), key=lambda i: i.name):
+        if info.ispkg:
+            try:
+                importlib.import_module(f"d5rl.envs.{info.name}.registration")
+            except ModuleNotFoundError as e:
+                if e.name != f"d5rl.envs.{info.name}.registration":
+                    raise
+    _LOADED = True
+
+
+def get_spec(task_id: str) -> TaskSpec:
+    """The spec of a registered task; clear error with suggestions otherwise."""
+    if isinstance(task_id, TaskSpec):
+        return task_id
+    _load_families()
+    if task_id in _REGISTRY:
+        return _REGISTRY[task_id]
+    if isinstance(task_id, str) and task_id.startswith("d5rl/") and task_id[5:] in _REGISTRY:
+        return _REGISTRY[task_id[5:]]
+    parse_task_id(task_id)  # malformed ids get the grammar error
+    close = difflib.get_close_matches(task_id, list(_REGISTRY), n=3, cutoff=0.5)
+    hint = f"did you mean {', '.join(close)}?" if close else "run `d5rl list` to see the registered tasks"
+    raise UnknownTaskError(f"unknown task {task_id!r}", hint)
+
+
+def list_tasks(family: str | None = None) -> list[str]:
+    """All registered task ids (optionally of one family), sorted."""
+    _load_families()
+    return sorted(t for t, s in _REGISTRY.items() if family is None or s.family == family)
+
+
+def resolve(ref: str) -> Any:
+    """Import ``"package.module:attr"``."""
+    module, _, attr = ref.partition(":")
+    obj: Any = importlib.import_module(module)
+    for part in attr.split("."):
+        obj = getattr(obj, part)
+    return obj
+
+
+def make_env(task_id: str, **kwargs: Any):
+    """Instantiate the task's environment (wrapped in a TimeLimit)."""
+    import gymnasium
+
+    spec = get_spec(task_id)
+    env_cls: Callable = resolve(spec.entry_point)
+    env = env_cls(**{**spec.env_kwargs, **kwargs})
+    return gymnasium.wrappers.TimeLimit(env, max_episode_steps=spec.max_episode_steps)
+
+
+def normalize_score(task_id: str, raw_return):
+    """Map a raw episode return to the task's normalized score (0 random, 1 expert)."""
+    from d5rl.errors import D5RLError
+
+    spec = get_spec(task_id)
+    if spec.score is None:
+        raise D5RLError(
+            f"task {task_id} has no reference scores yet",
+            f"compute them with `d5rl calibrate {task_id}`",
+        )
+    import numpy as np
+
+    r = spec.score
+    return (np.asarray(raw_return, dtype=np.float64) - r.random) / (r.expert - r.random)
