@@ -62,6 +62,9 @@ class DatasetSpec:
     generator_kwargs: dict = dataclasses.field(default_factory=dict)
     default_seed: int = 0
     description: str = ""
+    # "module:function" called by the loader on a finished dataset to build caches
+    # derived from it (e.g. camera frames rendered from stored states); see loading.py.
+    derived: str | None = None
 
 
 @dataclasses.dataclass(frozen=True)
