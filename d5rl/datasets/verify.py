@@ -1,0 +1,52 @@
+"""Integrity check of a generated dataset: every file present, every checksum right."""
+
+from __future__ import annotations
+
+import dataclasses
+from pathlib import Path
+
+from d5rl.datasets import format as fmt
+from d5rl.datasets.generation import dataset_root, dataset_spec
+from d5rl.errors import D5RLError
+from d5rl.registry import TaskSpec, get_spec
+
+
+@dataclasses.dataclass
+class VerifyReport:
+    root: Path
+    shards_checked: int
+    problems: list[str]
+
+    @property
+    def ok(self) -> bool:
+        return not self.problems
+
+
+def verify_dataset(task: str | TaskSpec, seed: int | None = None, progress: bool = False) -> VerifyReport:
+    """Re-hash every array of the dataset (and its derived caches) against its records."""
+    spec = get_spec(task)
+    root = dataset_root(dataset_spec(spec), seed)
+    problems: list[str] = []
+    manifest_path = root / fmt.MANIFEST
+    if not manifest_path.exists():
+        hint = "generation did not finish" if (root / "shards").exists() else "it was never generated"
+        return VerifyReport(root, 0, [f"{manifest_path}: missing ({hint}; run `d5rl generate {spec.id}`)"])
+    try:
+        manifest = fmt.load_json(manifest_path, "manifest")
+    except D5RLError as e:
+        return VerifyReport(root, 0, [e.message])
+    entries = manifest.get("shards", [])
+    dirs = [(root / "shards" / e["name"], e) for e in entries]
+    for render_root in sorted((root / "renders").glob("*")) if (root / "renders").exists() else []:
+        dirs += [(d, None) for d in fmt.iter_shard_dirs(render_root)]
+    it = dirs
+    if progress:
+        from tqdm.auto import tqdm
+
+        it = tqdm(dirs, unit="shard", desc=f"verify {root.parent.name}")
+    for d, entry in it:
+        problems += fmt.verify_shard(d, entry)
+    if entries and manifest.get("num_episodes") != entries[-1]["episodes"][1]:
+        problems.append(f"{manifest_path}: num_episodes {manifest.get('num_episodes')} "
+                        f"disagrees with its last shard {entries[-1]['episodes']}")
+    return VerifyReport(root, len(dirs), problems)

@@ -1,0 +1,160 @@
+import hashlib
+import os
+import signal
+import subprocess
+import sys
+import time
+from pathlib import Path
+
+import numpy as np
+import pytest
+
+from d5rl.datasets import format as fmt
+from d5rl.datasets.generation import dataset_root, generate
+from d5rl.datasets.loading import load_dataset
+from d5rl.datasets.verify import verify_dataset
+from d5rl.errors import DatasetCorruptError, DatasetNotFoundError, DatasetVersionError
+from tests.datasets.toy import register_toy
+
+REPO = Path(__file__).resolve().parents[2]
+
+
+def tree_digest(root: Path) -> dict[str, str]:
+    return {
+        str(p.relative_to(root)): hashlib.sha256(p.read_bytes()).hexdigest()
+        for p in sorted(root.rglob("*")) if p.is_file()
+    }
+
+
+def test_same_seed_same_bytes_any_worker_count(tmp_path, monkeypatch):
+    spec = register_toy("det", num_episodes=10, per_shard=3)
+    monkeypatch.setenv("D5RL_HOME", str(tmp_path / "a"))
+    a = tree_digest(generate(spec, workers=1, progress=False))
+    monkeypatch.setenv("D5RL_HOME", str(tmp_path / "b"))
+    b = tree_digest(generate(spec, workers=2, progress=False))
+    assert a == b
+    assert "manifest.json" in a and len([k for k in a if k.endswith("shard.json")]) == 4
+    c = tree_digest(generate(spec, seed=1, workers=1, progress=False))
+    assert c["manifest.json"] != a["manifest.json"]
+
+
+def test_round_trip_matches_generator():
+    spec = register_toy("rt", num_episodes=9, per_shard=4)
+    ds = load_dataset(spec, progress=False)
+    from d5rl.datasets.generation import episode_rng, make_generator
+
+    gen = make_generator(spec)
+    assert ds.num_episodes == 9
+    for i in range(9):
+        want = gen.episode(i, episode_rng(0, i))
+        got = ds.episode(i)
+        assert got.meta == want.meta
+        assert sorted(got.arrays) == sorted(want.arrays)
+        for k in want.arrays:
+            np.testing.assert_array_equal(got.arrays[k], want.arrays[k])
+            assert got.arrays[k].dtype == want.arrays[k].dtype
+
+
+def test_memory_mapped_view_equals_in_memory():
+    spec = register_toy("mm", num_episodes=11, per_shard=3)
+    a = load_dataset(spec, in_memory=False, progress=False)
+    b = load_dataset(spec, in_memory=True, progress=False)
+    assert not isinstance(a.arrays["observations"], np.ndarray) or isinstance(a.arrays["observations"], np.memmap)
+    rng = np.random.default_rng(0)
+    idx = rng.integers(0, len(a), 50)
+    ba, bb = a.sample(50, rng, indices=idx), b.sample(50, rng, indices=idx)
+    for k in ba:
+        np.testing.assert_array_equal(ba[k], bb[k])
+
+
+def test_prefix_and_extension_share_bytes(tmp_path, monkeypatch):
+    spec = register_toy("ext", num_episodes=10, per_shard=4)
+    small = load_dataset(spec, episodes=5, progress=False)
+    assert small.num_episodes == 5
+    full = load_dataset(spec, progress=False)  # extends 5 -> 10
+    assert full.num_episodes == 10
+    for i in range(5):
+        np.testing.assert_array_equal(small.episode(i).arrays["actions"], full.episode(i).arrays["actions"])
+    extended = tree_digest(dataset_root(spec.dataset))
+    monkeypatch.setenv("D5RL_HOME", str(tmp_path / "fresh"))
+    assert tree_digest(generate(spec, progress=False)) == extended
+    assert load_dataset(spec, episodes=3, progress=False).num_episodes == 3
+
+
+def test_missing_dataset_without_generate_says_what_to_do():
+    spec = register_toy("missing")
+    with pytest.raises(DatasetNotFoundError, match="d5rl generate test-missing-v0"):
+        load_dataset(spec, generate=False)
+
+
+def test_resume_after_kill_gives_identical_bytes(tmp_path, monkeypatch):
+    env = {**os.environ, "D5RL_HOME": str(tmp_path / "killed"), "PYTHONPATH": str(REPO)}
+    args = [sys.executable, "-m", "tests.datasets.toy", "resume", "24", "0.15", "1"]
+    proc = subprocess.Popen(args, env=env, cwd=REPO)
+    shards = tmp_path / "killed/datasets/test-resume/v1-seed0/shards"
+    deadline = time.time() + 60
+    while time.time() < deadline and len(list(shards.glob("shard-*"))) < 2:
+        time.sleep(0.05)
+    proc.send_signal(signal.SIGKILL)
+    proc.wait()
+    done_before = sorted(p.name for p in shards.glob("shard-*"))
+    assert 2 <= len(done_before) < 6, done_before
+    assert not (shards.parent / "manifest.json").exists()
+    mtimes = {p.name: (p / "shard.json").stat().st_mtime_ns for p in shards.glob("shard-*")}
+
+    subprocess.run(args, env=env, cwd=REPO, check=True, timeout=120)
+    for name, mt in mtimes.items():  # finished shards were kept, not redone
+        assert (shards / name / "shard.json").stat().st_mtime_ns == mt
+    assert not list(shards.glob(".shard-*"))  # temporaries of the killed writer are gone
+
+    env_clean = {**env, "D5RL_HOME": str(tmp_path / "clean")}
+    subprocess.run(args, env=env_clean, cwd=REPO, check=True, timeout=120)
+    assert tree_digest(shards.parent) == tree_digest(tmp_path / "clean/datasets/test-resume/v1-seed0")
+
+
+def test_verify_detects_corruption_and_loader_refuses_truncation():
+    spec = register_toy("corrupt", num_episodes=8, per_shard=4)
+    root = generate(spec, progress=False)
+    assert verify_dataset(spec).ok
+    target = root / "shards/shard-00001/actions.npy"
+    data = bytearray(target.read_bytes())
+    data[-3] ^= 0xFF
+    target.write_bytes(bytes(data))
+    report = verify_dataset(spec)
+    assert not report.ok
+    assert any("shard-00001/actions.npy" in p and "checksum" in p for p in report.problems)
+
+    (root / "shards/shard-00000/rewards.npy").write_bytes(b"\x93NUMPY garbage")
+    with pytest.raises(DatasetCorruptError, match="shard-00000"):
+        load_dataset(spec, generate=False)
+
+
+def test_changed_generator_version_is_refused(monkeypatch):
+    spec = register_toy("stale", num_episodes=4, per_shard=4)
+    generate(spec, progress=False)
+    from tests.datasets import toy
+
+    monkeypatch.setattr(toy.ToyGenerator, "version", "2")
+    with pytest.raises(DatasetVersionError, match="--force"):
+        load_dataset(spec, generate=False)
+    with pytest.raises(DatasetVersionError):
+        generate(spec, progress=False)
+    generate(spec, force=True, progress=False)
+    assert load_dataset(spec).metadata["generator_version"] == "2"
+
+
+def test_bad_format_version_is_refused():
+    spec = register_toy("fmtver", num_episodes=4, per_shard=4)
+    root = generate(spec, progress=False)
+    rec = fmt.load_json(root / "shards/shard-00000/shard.json", "x")
+    rec["format_version"] = 999
+    fmt.dump_json(rec, root / "shards/shard-00000/shard.json")
+    with pytest.raises(DatasetVersionError, match="format version 999"):
+        load_dataset(spec, generate=False)
+
+
+def test_relabel_replaces_rewards():
+    base = register_toy("relabel-base", num_episodes=4)
+    twin = register_toy("relabel-twin", num_episodes=4, relabel="tests.datasets.toy:relabel_double")
+    a, b = load_dataset(base, progress=False), load_dataset(twin, progress=False)
+    np.testing.assert_array_equal(b.rewards, 2 * a.rewards)
