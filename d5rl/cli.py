@@ -1,0 +1,254 @@
+"""The ``d5rl`` command line: list, info, generate, verify, render, export, train, eval."""
+
+from __future__ import annotations
+
+import argparse
+import sys
+from pathlib import Path
+
+from d5rl.errors import D5RLError
+
+
+def _table(rows: list[list[str]], header: list[str]) -> str:
+    widths = [max(len(str(r[i])) for r in [header, *rows]) for i in range(len(header))]
+    line = lambda r: "  ".join(str(c).ljust(w) for c, w in zip(r, widths)).rstrip()  # noqa: E731
+    return "\n".join([line(header), line(["-" * w for w in widths]), *map(line, rows)])
+
+
+def _human_bytes(n: float) -> str:
+    for unit in ("B", "KiB", "MiB", "GiB", "TiB"):
+        if n < 1024 or unit == "TiB":
+            return f"{n:.1f} {unit}" if unit != "B" else f"{int(n)} B"
+        n /= 1024
+    return f"{n:.1f} TiB"
+
+
+def _dataset_status(spec) -> tuple[str, dict | None]:
+    from d5rl.datasets import format as fmt
+    from d5rl.datasets.generation import dataset_root
+
+    if spec.dataset is None:
+        return "-", None
+    root = dataset_root(spec.dataset)
+    path = root / fmt.MANIFEST
+    if path.exists():
+        m = fmt.load_json(path, "manifest")
+        full = m["num_episodes"] >= spec.dataset.num_episodes
+        return ("ready" if full else f"partial ({m['num_episodes']} ep)"), m
+    if (root / "shards").exists():
+        return "incomplete (resume with generate)", None
+    return "not generated", None
+
+
+def cmd_list(args) -> int:
+    from d5rl.registry import get_spec, list_tasks
+
+    rows = []
+    for tid in list_tasks(args.family):
+        s = get_spec(tid)
+        status, _ = _dataset_status(s)
+        ds = s.dataset
+        rows.append([tid, s.max_episode_steps, ds.name if ds else "-", ds.num_episodes if ds else "-", status])
+    print(_table(rows, ["task", "horizon", "dataset", "episodes", "status"]))
+    return 0
+
+
+def cmd_info(args) -> int:
+    import numpy as np
+
+    from d5rl.datasets.generation import dataset_root
+    from d5rl.registry import get_spec, make_env
+
+    s = get_spec(args.task)
+    print(f"{s.id}\n  {s.description}")
+    env = make_env(s.id)
+    print(f"  horizon:      {s.max_episode_steps} steps of {env.unwrapped.dt:.3f} s")
+    print(f"  observation:  {env.observation_space}")
+    print(f"  action:       {env.action_space}")
+    env.close()
+    print(f"  score:        {s.score_definition}")
+    if s.score is not None:
+        print(f"                random = {s.score.random:.3f}, expert = {s.score.expert:.3f}  ({s.score.source})")
+    else:
+        print("                reference returns not computed yet")
+    if s.dataset is None:
+        return 0
+    d = s.dataset
+    status, manifest = _dataset_status(s)
+    print(f"  dataset:      {d.name} v{d.version}, {d.num_episodes} episodes, generator {d.generator}")
+    if d.description:
+        print(f"                {d.description}")
+    root = dataset_root(d)
+    print(f"  location:     {root}  [{status}]")
+    if manifest is not None:
+        size = sum(p.stat().st_size for p in root.rglob("*") if p.is_file())
+        print(f"  on disk:      {manifest['num_episodes']} episodes, {manifest['num_transitions']} transitions, "
+              f"{_human_bytes(size)}")
+        if args.stats:
+            from d5rl.datasets.loading import load_dataset
+
+            ds = load_dataset(s.id, generate=False, progress=False)
+            returns = np.add.reduceat(np.asarray(ds.rewards, np.float64), ds.episode_starts)
+            print(f"  returns:      mean {returns.mean():.2f} ± {returns.std():.2f}, "
+                  f"min {returns.min():.2f}, max {returns.max():.2f}")
+            print(f"  lengths:      mean {ds.episode_lengths.mean():.1f}, min {ds.episode_lengths.min()}, "
+                  f"max {ds.episode_lengths.max()}; terminals {int(np.asarray(ds.terminals).sum())}")
+            if s.score is not None:
+                ns = (returns - s.score.random) / (s.score.expert - s.score.random)
+                print(f"  normalized:   mean {ns.mean():.3f} (dataset episodes)")
+    return 0
+
+
+def cmd_generate(args) -> int:
+    from d5rl.datasets.generation import generate
+
+    root = generate(args.task, seed=args.seed, num_episodes=args.episodes, workers=args.workers, force=args.force)
+    print(f"dataset ready: {root}")
+    return 0
+
+
+def cmd_verify(args) -> int:
+    from d5rl.datasets.verify import verify_dataset
+
+    report = verify_dataset(args.task, seed=args.seed, progress=True)
+    if report.ok:
+        print(f"OK: {report.shards_checked} shards intact in {report.root}")
+        return 0
+    print(f"CORRUPT: {len(report.problems)} problem(s) in {report.root}", file=sys.stderr)
+    for p in report.problems:
+        print(f"  {p}", file=sys.stderr)
+    print(f"  fix: `d5rl generate {args.task}` regenerates missing shards; "
+          f"delete damaged shard directories first, or use --force", file=sys.stderr)
+    return 1
+
+
+def cmd_render(args) -> int:
+    import imageio.v2 as imageio
+    import numpy as np
+    from tqdm.auto import tqdm
+
+    from d5rl.registry import make_env
+
+    env = make_env(args.task, render_mode="rgb_array")
+    base = env.unwrapped
+    frames = []
+    if args.episode is not None:
+        from d5rl.datasets.loading import load_dataset
+
+        ds = load_dataset(args.task, episodes=args.episode + 1, generate=False, progress=False)
+        ep = ds.episode(args.episode)
+        if "states" not in ep.arrays:
+            raise D5RLError(f"{args.task}'s dataset stores no simulator states to replay")
+        env.reset(seed=args.seed)
+        for state in tqdm(ep.arrays["states"][: args.steps + 1], unit="frame", desc="render"):
+            base.set_state(state)
+            frames.append(env.render())
+    else:
+        rng = np.random.default_rng(args.seed)
+        env.reset(seed=args.seed)
+        env.action_space.seed(int(rng.integers(2**31)))
+        frames.append(env.render())
+        for _ in tqdm(range(args.steps), unit="frame", desc="render"):
+            _, _, term, trunc, _ = env.step(env.action_space.sample())
+            frames.append(env.render())
+            if term or trunc:
+                break
+    env.close()
+    out = Path(args.out)
+    out.parent.mkdir(parents=True, exist_ok=True)
+    imageio.mimsave(out, frames, fps=base.metadata.get("render_fps", 20), macro_block_size=1)
+    print(f"wrote {len(frames)} frames to {out}")
+    return 0
+
+
+def cmd_export_minari(args) -> int:
+    from d5rl.datasets.export import export_minari
+
+    path = export_minari(args.task, dataset_id=args.dataset_id, seed=args.seed, episodes=args.episodes)
+    print(f"Minari dataset written to {path}")
+    return 0
+
+
+def build_parser() -> argparse.ArgumentParser:
+    import d5rl
+
+    p = argparse.ArgumentParser(prog="d5rl", description="D5RL offline RL benchmark: tasks, datasets, agents.")
+    p.add_argument("--version", action="version", version=f"d5rl {d5rl.__version__}")
+    sub = p.add_subparsers(dest="command", required=True, metavar="COMMAND")
+
+    q = sub.add_parser("list", help="list registered tasks and their dataset status")
+    q.add_argument("--family", help="only this family (a1, kitchen, wx, ...)")
+    q.set_defaults(func=cmd_list)
+
+    q = sub.add_parser("info", help="describe a task, its spaces, scores and dataset")
+    q.add_argument("task")
+    q.add_argument("--stats", action="store_true", help="also load the dataset and print return statistics")
+    q.set_defaults(func=cmd_info)
+
+    q = sub.add_parser("generate", help="generate (or resume, or extend) a task's dataset")
+    q.add_argument("task")
+    q.add_argument("--episodes", type=int, help="generate only the first N episodes (a prefix of the full set)")
+    q.add_argument("--seed", type=int, help="dataset seed (default: the task's)")
+    q.add_argument("--workers", type=int, help="processes (default: all cores)")
+    q.add_argument("--force", action="store_true", help="delete what is on disk and start over")
+    q.set_defaults(func=cmd_generate)
+
+    q = sub.add_parser("verify", help="re-check every checksum of a generated dataset")
+    q.add_argument("task")
+    q.add_argument("--seed", type=int)
+    q.set_defaults(func=cmd_verify)
+
+    q = sub.add_parser("render", help="write a video of a random rollout or a dataset episode")
+    q.add_argument("task")
+    q.add_argument("--out", default="video.mp4")
+    q.add_argument("--steps", type=int, default=200)
+    q.add_argument("--seed", type=int, default=0)
+    q.add_argument("--episode", type=int, help="replay this dataset episode from its stored states")
+    q.set_defaults(func=cmd_render)
+
+    q = sub.add_parser("export-minari", help="export a dataset in the Minari format")
+    q.add_argument("task")
+    q.add_argument("--dataset-id", help="Minari id (default: d5rl/<task name>-v<N>)")
+    q.add_argument("--seed", type=int)
+    q.add_argument("--episodes", type=int)
+    q.set_defaults(func=cmd_export_minari)
+
+    for module, fn in _PLUGINS:
+        try:
+            mod = __import__(module, fromlist=[fn])
+        except ModuleNotFoundError as e:
+            if e.name and (e.name == module or module.startswith(e.name + ".")):
+                continue  # that part of d5rl is not present
+            if e.name in ("jax", "flax", "optax"):
+                continue  # the `train` extra is not installed
+            raise
+        getattr(mod, fn)(sub)
+    return p
+
+
+# Subcommands that live next to the code they drive.
+_PLUGINS = [
+    ("d5rl.training.cli", "add_train_parser"),
+    ("d5rl.training.cli", "add_eval_parser"),
+    ("d5rl.envs.kitchen.d4rl_import", "add_import_d4rl_kitchen_parser"),
+    ("d5rl.envs.a1.calibrate", "add_calibrate_parser"),
+]
+
+
+def main(argv: list[str] | None = None) -> int:
+    parser = build_parser()
+    args = parser.parse_args(argv)
+    try:
+        return int(args.func(args) or 0)
+    except D5RLError as e:
+        print(f"error: {e.message}", file=sys.stderr)
+        if e.hint:
+            print(f"  hint: {e.hint}", file=sys.stderr)
+        return 2
+    except KeyboardInterrupt:
+        print("interrupted; generation resumes where it stopped when run again", file=sys.stderr)
+        return 130
+
+
+if __name__ == "__main__":
+    sys.exit(main())

@@ -1,0 +1,113 @@
+import numpy as np
+import pytest
+
+from d5rl.datasets.episode import Episode
+from d5rl.datasets.loading import ChunkedArray, Dataset, load_dataset
+from tests.datasets.toy import register_toy
+
+
+def make_ds(lengths=(3, 5, 2), terminal=(True, False, True), pixels=False):
+    eps = []
+    for e, (t, term) in enumerate(zip(lengths, terminal)):
+        obs = (100 * e + np.arange(t + 1, dtype=np.float32))[:, None]
+        arrays = {
+            "actions": np.zeros((t, 1), np.float32),
+            "rewards": (np.arange(t, dtype=np.float32) + 1) * (e + 1),
+            "terminals": np.zeros(t, bool),
+            "timeouts": np.zeros(t, bool),
+        }
+        if pixels:
+            arrays["observations/pixels"] = np.broadcast_to(obs[:, :, None, None], (t + 1, 2, 2, 1)).astype(np.uint8)
+            arrays["observations/proprio"] = obs
+        else:
+            arrays["observations"] = obs
+        arrays["terminals"][-1] = term
+        arrays["timeouts"][-1] = not term
+        eps.append(Episode(arrays, {"e": e}))
+    return Dataset.from_episodes(eps)
+
+
+def test_chunked_array_indexing_matches_numpy():
+    rng = np.random.default_rng(0)
+    parts = [rng.normal(size=(n, 2, 3)) for n in (4, 1, 7, 3)]
+    full = np.concatenate(parts)
+    ca = ChunkedArray(parts)
+    assert ca.shape == full.shape and len(ca) == len(full)
+    for i in (0, 3, 4, 5, 14, -1):
+        np.testing.assert_array_equal(ca[i], full[i])
+    for sl in (slice(0, 15), slice(2, 9), slice(4, 5), slice(6, 6), slice(1, 14, 3)):
+        np.testing.assert_array_equal(ca[sl], full[sl])
+    idx = rng.integers(0, 15, size=(5, 4))
+    np.testing.assert_array_equal(ca[idx], full[idx])
+    np.testing.assert_array_equal(np.asarray(ca), full)
+    with pytest.raises(IndexError):
+        ca[np.array([15])]
+
+
+def test_next_observations_follow_episode_boundaries():
+    ds = make_ds()
+    obs, nxt = ds.observations[:, 0], ds.next_observations[:, 0]
+    np.testing.assert_array_equal(obs, [0, 1, 2, 100, 101, 102, 103, 104, 200, 201])
+    np.testing.assert_array_equal(nxt, obs + 1)  # includes each episode's final observation
+    b = ds.sample(64, np.random.default_rng(1))
+    np.testing.assert_array_equal(b["next_observations"], b["observations"] + 1)
+    np.testing.assert_array_equal(b["masks"], 1 - b["terminals"])
+
+
+def test_mc_returns_brute_force():
+    ds = make_ds()
+    g = 0.9
+    want = []
+    for e, t in enumerate((3, 5, 2)):
+        r = (np.arange(t) + 1.0) * (e + 1)
+        want += [sum(g ** k * r[j + k] for k in range(t - j)) for j in range(t)]
+    np.testing.assert_allclose(ds.mc_returns(g), want, rtol=1e-6)
+    b = ds.sample(8, np.random.default_rng(0), mc_gamma=g, indices=np.arange(8))
+    np.testing.assert_allclose(b["mc_returns"], want[:8], rtol=1e-6)
+
+
+def test_n_step_returns_stop_at_episode_end_and_terminals():
+    ds = make_ds()
+    g = 0.5
+    b = ds.sample(10, np.random.default_rng(0), n_step=3, gamma=g, indices=np.arange(10))
+    # transition 0 of episode 0 (rewards 1,2,3): 1 + .5*2 + .25*3, next obs = step 3, terminal -> discount 0
+    assert b["rewards"][0] == pytest.approx(1 + 0.5 * 2 + 0.25 * 3)
+    assert b["next_observations"][0, 0] == 3 and b["discounts"][0] == 0
+    # transition 1: rewards 2,3 then the episode ends (terminal)
+    assert b["rewards"][1] == pytest.approx(2 + 0.5 * 3) and b["discounts"][1] == 0
+    # episode 1 (timeout, rewards 2,4,6,8,10): transition 3 -> 2 + 1*... steps 0..2
+    assert b["rewards"][3] == pytest.approx(2 + 0.5 * 4 + 0.25 * 6)
+    assert b["next_observations"][3, 0] == 103 and b["discounts"][3] == pytest.approx(0.125)
+    # last transition of the timed-out episode: one reward, bootstrap from its final observation
+    assert b["rewards"][7] == pytest.approx(10) and b["next_observations"][7, 0] == 105
+    assert b["discounts"][7] == pytest.approx(0.5)
+
+
+def test_frame_stack_clamps_at_episode_start():
+    ds = make_ds(pixels=True)
+    b = ds.sample(10, np.random.default_rng(0), frame_stack=3, indices=np.arange(10))
+    px = b["observations"]["pixels"]
+    assert px.shape == (10, 2, 2, 3)
+    np.testing.assert_array_equal(px[0, 0, 0], [0, 0, 0])  # first step: repeated
+    np.testing.assert_array_equal(px[2, 0, 0], [0, 1, 2])
+    np.testing.assert_array_equal(px[3, 0, 0], [100, 100, 100])  # new episode: no leak from the last
+    np.testing.assert_array_equal(b["next_observations"]["pixels"][3, 0, 0], [100, 100, 101])
+    assert b["observations"]["proprio"].shape == (10, 1)
+
+
+def test_to_d4rl_and_episode_iteration():
+    ds = make_ds()
+    d = ds.to_d4rl()
+    assert set(d) >= {"observations", "next_observations", "actions", "rewards", "terminals", "timeouts"}
+    assert all(len(v) == 10 for v in d.values())
+    eps = list(ds.episodes())
+    assert [e.num_transitions for e in eps] == [3, 5, 2] and eps[1].meta == {"e": 1}
+
+
+def test_obs_keys_selects_parts():
+    spec = register_toy("keys", num_episodes=4, pixels=True)
+    ds = load_dataset(spec, obs_keys=["proprio"], progress=False)
+    assert isinstance(ds.observations, np.ndarray) is False
+    assert set(ds.observations) == {"proprio"}
+    with pytest.raises(KeyError, match="no"):
+        load_dataset(spec, obs_keys=["depth"], progress=False)
