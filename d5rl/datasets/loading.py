@@ -37,7 +37,8 @@ class ChunkedArray:
     def __init__(self, chunks: list[np.ndarray]):
         if not chunks:
             raise ValueError("ChunkedArray needs at least one chunk")
-        self.chunks = chunks
+        # Plain ndarray views of memmaps: subclass dispatch costs more than the copy itself.
+        self.chunks = [c.view(np.ndarray) if isinstance(c, np.memmap) else c for c in chunks]
         lens = np.array([len(c) for c in chunks], dtype=np.int64)
         self.starts = np.concatenate([[0], np.cumsum(lens)[:-1]])
         self.ends = np.cumsum(lens)
@@ -81,11 +82,16 @@ class ChunkedArray:
         flat = idx.reshape(-1).astype(np.int64)
         if flat.size and (flat.min() < 0 or flat.max() >= len(self)):
             raise IndexError(f"index out of range for length {len(self)}")
-        which = np.searchsorted(self.ends, flat, side="right")
         out = np.empty((flat.size,) + self.shape[1:], self.dtype)
-        for c in np.unique(which):
-            m = which == c
-            out[m] = self.chunks[c][flat[m] - self.starts[c]]
+        if len(self.chunks) == 1:
+            np.take(self.chunks[0], flat, axis=0, out=out)
+            return out.reshape(idx.shape + self.shape[1:])
+        which = np.searchsorted(self.ends, flat, side="right")
+        order = np.argsort(which, kind="stable")
+        bounds = np.searchsorted(which[order], np.arange(len(self.chunks) + 1))
+        for c in np.flatnonzero(bounds[1:] > bounds[:-1]):
+            sel = order[bounds[c]: bounds[c + 1]]
+            out[sel] = self.chunks[c][flat[sel] - self.starts[c]]
         return out.reshape(idx.shape + self.shape[1:])
 
 

@@ -1,0 +1,41 @@
+import shutil
+
+from d5rl.cli import main
+from d5rl.datasets.generation import dataset_root
+from tests.datasets.toy import register_toy
+
+
+def test_generate_verify_and_corruption_report(capsys):
+    spec = register_toy("cli", num_episodes=6, per_shard=2)
+    assert main(["generate", spec.id, "--episodes", "4", "--workers", "1"]) == 0
+    assert main(["list"]) == 0
+    out = capsys.readouterr().out
+    assert "test-cli-v0" in out and "partial (4 ep)" in out
+    assert main(["generate", spec.id, "--workers", "1"]) == 0
+    assert main(["verify", spec.id]) == 0
+    assert "OK: 3 shards intact" in capsys.readouterr().out
+
+    root = dataset_root(spec.dataset)
+    (root / "shards/shard-00002/states.npy").unlink()
+    assert main(["verify", spec.id]) == 1
+    err = capsys.readouterr().err
+    assert "CORRUPT" in err and "shard-00002/states.npy: missing" in err
+
+    shutil.rmtree(root / "shards/shard-00002")
+    (root / "manifest.json").unlink()
+    assert main(["generate", spec.id, "--workers", "1"]) == 0  # regenerates only the damaged shard
+    assert main(["verify", spec.id]) == 0
+
+
+def test_bad_task_is_one_clear_line_not_a_traceback(capsys):
+    assert main(["info", "a1-wallk"]) == 2
+    err = capsys.readouterr().err
+    assert err.startswith("error: 'a1-wallk' is not a task id") and "Traceback" not in err
+    assert main(["verify", "nope-nope-v0"]) == 2
+    assert "unknown task" in capsys.readouterr().err
+
+
+def test_verify_of_missing_dataset_says_generate(capsys):
+    spec = register_toy("cli-missing")
+    assert main(["verify", spec.id]) == 1
+    assert f"d5rl generate {spec.id}" in capsys.readouterr().err
