@@ -1,0 +1,86 @@
+"""DrQ image augmentation for pixel observations, in JAX.
+
+* random shift (Kostrikov et al. 2020): pad by 4 pixels (edge replication) and
+  crop back to the original size at a random offset, per sample;
+* colour jitter: random brightness, contrast, saturation and hue per sample,
+  the same for every stacked frame of a sample, applied with probability ``p``.
+
+Images are uint8 ``(B, H, W, 3·stack)`` and stay uint8.
+"""
+
+from __future__ import annotations
+
+import jax
+import jax.numpy as jnp
+
+from d5rl.agents.networks import pixel_keys
+
+
+def random_shift(key, imgs, pad: int = 4):
+    """Per-sample random translation by up to ``pad`` pixels (edge padding)."""
+    b, h, w, _ = imgs.shape
+    padded = jnp.pad(imgs, ((0, 0), (pad, pad), (pad, pad), (0, 0)), mode="edge")
+    offsets = jax.random.randint(key, (b, 2), 0, 2 * pad + 1)
+
+    def crop(img, off):
+        return jax.lax.dynamic_slice(img, (off[0], off[1], 0), (h, w, img.shape[-1]))
+
+    return jax.vmap(crop)(padded, offsets)
+
+
+_RGB_TO_YIQ = jnp.array([[0.299, 0.587, 0.114], [0.596, -0.274, -0.322], [0.211, -0.523, 0.312]])
+_YIQ_TO_RGB = jnp.linalg.inv(_RGB_TO_YIQ)
+
+
+def color_jitter(key, imgs, brightness=0.2, contrast=0.2, saturation=0.2, hue=0.05, p=0.8):
+    """Random brightness/contrast/saturation/hue per sample (hue as a rotation in YIQ space)."""
+    b, h, w, c = imgs.shape
+    x = imgs.astype(jnp.float32).reshape(b, h, w, c // 3, 3) / 255.0
+    kb, kc, ks, kh, kp = jax.random.split(key, 5)
+    shape = (b, 1, 1, 1, 1)
+    fb = jax.random.uniform(kb, shape, minval=1 - brightness, maxval=1 + brightness)
+    fc = jax.random.uniform(kc, shape, minval=1 - contrast, maxval=1 + contrast)
+    fs = jax.random.uniform(ks, shape, minval=1 - saturation, maxval=1 + saturation)
+    theta = jax.random.uniform(kh, (b,), minval=-hue, maxval=hue) * 2 * jnp.pi
+    y = x * fb
+    gray = jnp.sum(y * jnp.array([0.299, 0.587, 0.114]), axis=-1, keepdims=True)
+    y = (y - gray.mean(axis=(1, 2, 4), keepdims=True)) * fc + gray.mean(axis=(1, 2, 4), keepdims=True)
+    gray = jnp.sum(y * jnp.array([0.299, 0.587, 0.114]), axis=-1, keepdims=True)
+    y = (y - gray) * fs + gray
+    cos, sin = jnp.cos(theta), jnp.sin(theta)
+    zero, one = jnp.zeros_like(cos), jnp.ones_like(cos)
+    rot = jnp.stack([jnp.stack([one, zero, zero], -1), jnp.stack([zero, cos, -sin], -1),
+                     jnp.stack([zero, sin, cos], -1)], -2)  # (b, 3, 3)
+    m = jnp.einsum("ij,bjk,kl->bil", _YIQ_TO_RGB, rot, _RGB_TO_YIQ)
+    y = jnp.einsum("bhwsc,bdc->bhwsd", y, m)
+    apply = jax.random.uniform(kp, shape) < p
+    y = jnp.where(apply, y, x)
+    return jnp.clip(jnp.round(y * 255.0), 0, 255).astype(jnp.uint8).reshape(b, h, w, c)
+
+
+def augment_observations(key, obs, shift_pad: int = 4, jitter: bool = True):
+    """Augment every ``pixels*`` array of a dict observation; other inputs pass through."""
+    keys = pixel_keys(obs)
+    if not keys:
+        return obs
+    out = dict(obs)
+    for i, k in enumerate(keys):
+        k1, k2 = jax.random.split(jax.random.fold_in(key, i))
+        img = obs[k]
+        if shift_pad:
+            img = random_shift(k1, img, shift_pad)
+        if jitter and img.shape[-1] % 3 == 0:
+            img = color_jitter(k2, img)
+        out[k] = img
+    return out
+
+
+def augment_batch(key, batch, config):
+    """Augment ``observations`` and ``next_observations`` independently (DrQ) when the config asks."""
+    if not pixel_keys(batch["observations"]) or not config.augment:
+        return batch
+    k1, k2 = jax.random.split(key)
+    pad, jitter = int(config.shift_pad), bool(config.color_jitter)
+    return {**batch,
+            "observations": augment_observations(k1, batch["observations"], pad, jitter),
+            "next_observations": augment_observations(k2, batch["next_observations"], pad, jitter)}

@@ -1,0 +1,139 @@
+"""Pieces every agent shares: the agent base class, train states, observation batching.
+
+An agent is an immutable Flax struct.  Subclasses implement ``_update(batch)``
+(pure, returns ``(agent, metrics)``); the base class jits it as ``update`` and
+offers ``update_many`` (several updates in one ``lax.scan``; worth it for MLPs
+on CPU, not for CNNs) plus checkpoint (de)serialisation.
+"""
+
+from __future__ import annotations
+
+import functools
+from typing import Any
+
+import flax
+import flax.linen as nn
+import jax
+import jax.numpy as jnp
+import numpy as np
+import optax
+from flax.training.train_state import TrainState
+
+from d5rl.agents.config import Config
+
+
+def nonpytree_field(**kwargs):
+    return flax.struct.field(pytree_node=False, **kwargs)
+
+
+# Defaults every agent carries for pixel observations (ignored for state observations).
+ENCODER_DEFAULTS = dict(
+    encoder_channels=(16, 32, 32),  # IMPALA stack widths (Espeholt et al. 2018; D5RL appendix B)
+    encoder_latent_dim=50,  # Dense+LayerNorm+tanh projection of CNN features (DrQ); 0 = none
+    augment=True,  # DrQ augmentation of pixel observations during training
+    shift_pad=4,  # random-shift padding in pixels (DrQ)
+    color_jitter=True,  # colour jitter on top of the random shift (D5RL appendix B)
+)
+
+
+def obs_ndims(example_observations) -> tuple:
+    """ndim of each observation leaf *without* a batch axis (example obs carry one)."""
+    return tuple(np.ndim(x) - 1 for x in jax.tree_util.tree_leaves(example_observations))
+
+
+def to_batched(observations, ndims: tuple):
+    """Add a batch axis to a single observation; returns (obs, was_single)."""
+    leaves = jax.tree_util.tree_leaves(observations)
+    single = np.ndim(leaves[0]) == ndims[0]
+    if single:
+        observations = jax.tree_util.tree_map(lambda x: np.asarray(x)[None], observations)
+    return observations, single
+
+
+def make_train_state(module: nn.Module, key, inputs: tuple, lr: float | optax.Schedule, **init_kwargs) -> TrainState:
+    params = module.init(key, *inputs, **init_kwargs)["params"]
+    return TrainState.create(apply_fn=module.apply, params=params, tx=optax.adam(lr))
+
+
+def check_batch(batch: dict, required=("observations", "actions", "rewards", "masks", "next_observations")):
+    missing = [k for k in required if k not in batch]
+    if missing:
+        raise KeyError(f"batch is missing {missing}; it has {sorted(batch)}")
+
+
+class Agent(flax.struct.PyTreeNode):
+    """Base class.  Subclasses declare ``rng``, their train states, ``config`` and ``obs_ndim``."""
+
+    def _update(self, batch):  # pragma: no cover - abstract
+        raise NotImplementedError
+
+    @jax.jit
+    def update(self, batch):
+        """One gradient update (for RLPD: one UTD round); returns ``(new_agent, metrics)``."""
+        return self._update(batch)
+
+    @functools.partial(jax.jit, donate_argnums=0)
+    def update_many(self, batches):
+        """``len(batches)`` updates in one ``lax.scan`` (batches stacked on a leading axis).
+
+        Donates the agent's buffers: use only the returned agent afterwards.
+        Returns metrics averaged over the updates.
+        """
+        agent, metrics = jax.lax.scan(lambda a, b: a._update(b), self, batches)
+        return agent, jax.tree_util.tree_map(jnp.mean, metrics)
+
+    @functools.partial(jax.jit, donate_argnums=0)
+    def update_donated(self, batch):
+        """:meth:`update` that donates the old agent's buffers (training loops)."""
+        return self._update(batch)
+
+    # --- acting -----------------------------------------------------------------------------
+    def sample_actions(self, observations, seed=None, temperature: float = 1.0):
+        """Stochastic actions for exploration; a single observation gives a single action."""
+        obs, single = to_batched(observations, self.obs_ndim)
+        if seed is None:
+            seed = self.rng
+        a = self._sample(obs, seed, temperature)
+        return a[0] if single else a
+
+    def eval_actions(self, observations, seed=None):
+        """Deterministic (or, for diffusion policies, seeded) actions for evaluation."""
+        obs, single = to_batched(observations, self.obs_ndim)
+        a = self._eval(obs, self.rng if seed is None else seed)
+        return a[0] if single else a
+
+    @functools.partial(jax.jit, static_argnames=("temperature",))
+    def _sample(self, obs, seed, temperature=1.0):
+        dist = self.actor.apply_fn({"params": self.actor.params}, obs, temperature)
+        return jnp.clip(dist.sample(seed), -1, 1)
+
+    @jax.jit
+    def _eval(self, obs, seed):
+        dist = self.actor.apply_fn({"params": self.actor.params}, obs)
+        return jnp.clip(dist.mode(), -1, 1)
+
+    # --- config / checkpoints -------------------------------------------------------------------
+    def get_config(self) -> Config:
+        return self.config
+
+    def to_bytes(self) -> bytes:
+        return flax.serialization.to_bytes(self)
+
+    def from_bytes(self, data: bytes):
+        """Restore state saved by :meth:`to_bytes` into an agent created with the same config."""
+        return flax.serialization.from_bytes(self, data)
+
+
+def split_utd(batch, utd: int):
+    """Reshape every leaf (U·B, ...) → (U, B, ...)."""
+    return jax.tree_util.tree_map(lambda x: x.reshape((utd, x.shape[0] // utd) + x.shape[1:]), batch)
+
+
+def prepare_example(example_observations, example_actions):
+    """Make example inputs batched numpy arrays (a single observation gets a batch axis of 1)."""
+    ex_obs = jax.tree_util.tree_map(np.asarray, example_observations)
+    ex_act = np.asarray(example_actions, dtype=np.float32)
+    if ex_act.ndim == 1:
+        ex_act = ex_act[None]
+        ex_obs = jax.tree_util.tree_map(lambda x: x[None], ex_obs)
+    return ex_obs, ex_act

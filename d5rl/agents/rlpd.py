@@ -1,0 +1,149 @@
+"""RLPD: Reinforcement Learning with Prior Data (Ball et al., 2023).
+
+SAC with a large LayerNorm critic ensemble, a random subset of target critics
+for the backup, a high update-to-data (UTD) ratio, and symmetric sampling (half
+of every batch from the offline data, half from the online replay buffer; the
+training loop does the mixing).  One :meth:`update` takes a batch of
+``utd_ratio × batch_size`` transitions, splits it into ``utd_ratio`` minibatches
+and does that many critic updates, then one actor and one temperature update on
+the last minibatch, all inside one jit.
+
+Metrics: ``critic/loss``, ``critic/q``, ``critic/target_q``, ``actor/loss``,
+``actor/entropy``, ``actor/temperature``, ``actor/temperature_loss``.
+"""
+
+from __future__ import annotations
+
+from typing import Any
+
+import jax
+import jax.numpy as jnp
+
+from d5rl.agents.augment import augment_batch
+from d5rl.agents.common import (ENCODER_DEFAULTS, Agent, check_batch, make_train_state, nonpytree_field,
+                                obs_ndims, prepare_example, split_utd)
+from d5rl.agents.config import Config
+from d5rl.agents.networks import Critic, GaussianPolicy, Temperature, is_pixel_obs, make_encoder, soft_update
+
+
+class RLPDAgent(Agent):
+    rng: Any
+    actor: Any
+    critic: Any
+    target_critic_params: Any
+    temp: Any
+    config: Config = nonpytree_field()
+    obs_ndim: tuple = nonpytree_field()
+
+    # --- losses ----------------------------------------------------------------------------------
+    def critic_loss(self, critic_params, batch, key):
+        k_act, k_sub, k_drop = jax.random.split(key, 3)
+        dist = self.actor.apply_fn({"params": self.actor.params}, batch["next_observations"])
+        next_actions, next_logp = dist.sample_and_log_prob(k_act)
+        target_qs = self.critic.apply_fn({"params": self.target_critic_params}, batch["next_observations"], next_actions)
+        subset = jax.random.choice(k_sub, self.config.num_qs, (self.config.num_min_qs,), replace=False)
+        next_q = target_qs[subset].min(axis=0)
+        gamma = self.config.discount
+        target = batch["rewards"] + gamma * batch["masks"] * next_q
+        if self.config.backup_entropy:
+            temperature = self.temp.apply_fn({"params": self.temp.params})
+            target = target - gamma * batch["masks"] * temperature * next_logp
+        target = jax.lax.stop_gradient(target)
+        qs = self.critic.apply_fn({"params": critic_params}, batch["observations"], batch["actions"], True,
+                                  rngs={"dropout": k_drop})
+        loss = ((qs - target[None]) ** 2).mean()
+        return loss, {"critic/loss": loss, "critic/q": qs.mean(), "critic/target_q": target.mean()}
+
+    def actor_loss(self, actor_params, batch, key):
+        k_act, k_drop = jax.random.split(key)
+        dist = self.actor.apply_fn({"params": actor_params}, batch["observations"])
+        actions, logp = dist.sample_and_log_prob(k_act)
+        qs = self.critic.apply_fn({"params": self.critic.params}, batch["observations"], actions, True,
+                                  rngs={"dropout": k_drop})
+        temperature = self.temp.apply_fn({"params": self.temp.params})
+        loss = (temperature * logp - qs.mean(axis=0)).mean()
+        return loss, {"actor/loss": loss, "actor/entropy": -logp.mean()}
+
+    def temperature_loss(self, temp_params, entropy):
+        temperature = self.temp.apply_fn({"params": temp_params})
+        loss = (temperature * (entropy - self.config.target_entropy)).mean()
+        return loss, {"actor/temperature": temperature, "actor/temperature_loss": loss}
+
+    # --- updates -----------------------------------------------------------------------------------
+    def _update_critic(self, batch):
+        rng, key = jax.random.split(self.rng)
+        grads, info = jax.grad(self.critic_loss, has_aux=True)(self.critic.params, batch, key)
+        critic = self.critic.apply_gradients(grads=grads)
+        target = soft_update(self.target_critic_params, critic.params, self.config.tau)
+        return self.replace(rng=rng, critic=critic, target_critic_params=target), info
+
+    def _update_actor_and_temperature(self, batch):
+        rng, key = jax.random.split(self.rng)
+        grads, info = jax.grad(self.actor_loss, has_aux=True)(self.actor.params, batch, key)
+        actor = self.actor.apply_gradients(grads=grads)
+        tgrads, tinfo = jax.grad(self.temperature_loss, has_aux=True)(self.temp.params, info["actor/entropy"])
+        temp = self.temp.apply_gradients(grads=tgrads)
+        return self.replace(rng=rng, actor=actor, temp=temp), {**info, **tinfo}
+
+    def _update(self, batch):
+        rng, aug_key = jax.random.split(self.rng)
+        agent = self.replace(rng=rng)
+        batch = augment_batch(aug_key, batch, self.config)
+        utd = self.config.utd_ratio
+        minibatches = split_utd(batch, utd)
+        if is_pixel_obs(batch["observations"]):
+            # Unrolled: lax.scan over convolutions is far slower on CPU.
+            for i in range(utd):
+                agent, critic_info = agent._update_critic(jax.tree_util.tree_map(lambda x: x[i], minibatches))
+        else:
+            agent, critic_infos = jax.lax.scan(lambda a, b: a._update_critic(b), agent, minibatches)
+            critic_info = jax.tree_util.tree_map(lambda x: x[-1], critic_infos)
+        last = jax.tree_util.tree_map(lambda x: x[-1], minibatches)
+        agent, actor_info = agent._update_actor_and_temperature(last)
+        return agent, {**critic_info, **actor_info}
+
+    # --- construction ------------------------------------------------------------------------------
+    @classmethod
+    def create(cls, seed: int, example_observations, example_actions, config: Config | None = None):
+        config = get_config() if config is None else config
+        ex_obs, ex_act = prepare_example(example_observations, example_actions)
+        action_dim = ex_act.shape[-1]
+        if config.target_entropy is None:
+            config = config.replace(target_entropy=-action_dim / 2)
+        rng = jax.random.PRNGKey(seed)
+        rng, k_actor, k_critic, k_temp = jax.random.split(rng, 4)
+        actor_def = GaussianPolicy(make_encoder(config), config.hidden_dims, action_dim, tanh_squash=True,
+                                   log_std_min=config.log_std_min, log_std_max=config.log_std_max)
+        critic_def = Critic(make_encoder(config), config.hidden_dims, config.num_qs, config.critic_layer_norm,
+                            config.critic_dropout)
+        actor = make_train_state(actor_def, k_actor, (ex_obs,), config.actor_lr)
+        critic = make_train_state(critic_def, k_critic, (ex_obs, ex_act), config.critic_lr)
+        temp = make_train_state(Temperature(config.init_temperature), k_temp, (), config.temp_lr)
+        return cls(rng=rng, actor=actor, critic=critic, target_critic_params=critic.params, temp=temp,
+                   config=config, obs_ndim=obs_ndims(ex_obs))
+
+
+def get_config() -> Config:
+    return Config(
+        agent_name="rlpd",
+        actor_lr=3e-4,  # Adam learning rate of the policy (RLPD paper, Table 5)
+        critic_lr=3e-4,  # Adam learning rate of the critic ensemble
+        temp_lr=3e-4,  # Adam learning rate of the SAC temperature
+        hidden_dims=(256, 256),  # MLP widths of actor and critics
+        discount=0.99,  # γ
+        tau=0.005,  # Polyak rate of the target critics
+        num_qs=10,  # critic ensemble size (RLPD: 10)
+        num_min_qs=2,  # random subset of target critics whose min is the backup (RLPD: 2)
+        critic_layer_norm=True,  # LayerNorm in the critic (RLPD's key ingredient)
+        critic_dropout=None,  # dropout rate in the critic (None = off; DroQ-style if set)
+        init_temperature=1.0,  # initial SAC temperature α
+        target_entropy=None,  # None = −|A|/2 (RLPD's choice)
+        backup_entropy=True,  # subtract γ·α·log π(a'|s') in the critic target (SAC)
+        log_std_min=-20.0,  # clip of the policy's log-std
+        log_std_max=2.0,
+        utd_ratio=20,  # critic updates per update() call; batches hold utd_ratio × batch_size (D5RL: 20)
+        batch_size=256,  # minibatch size per critic update (256 state, 64 pixels in D5RL)
+        offline_ratio=0.5,  # share of every online batch drawn from the offline data (symmetric sampling)
+        start_steps=5000,  # random-action environment steps before learning online (RLPD: 5000)
+        **ENCODER_DEFAULTS,
+    )
