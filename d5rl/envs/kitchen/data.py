@@ -1,0 +1,161 @@
+"""The standard kitchen dataset: scripted demonstrations of 22 four-subtask combinations.
+
+Like the relay-policy-learning data that D4RL and D5RL used, every episode performs four
+subtasks in a fixed order; the 22 combinations below never contain the ``partial``
+task's full set (microwave, kettle, bottom burner, light switch), so that task needs
+combinatorial generalization.  Episodes end when the demonstrator finishes its fourth
+subtask (or after 280 steps); 563 episodes are spread over the combinations round-robin.
+
+Stored per step: simulator ``states`` (to re-render any camera at any resolution),
+``observations/proprio`` (9 joint positions) and ``infos/completed`` (per transition,
+which of the seven subtasks are in their goal configuration after it).  Camera frames are
+a derived cache (:func:`renders`), built from the states on first load.  ``rewards`` count
+the episode's own four subtasks; each task relabels them with :func:`relabel`.
+"""
+
+from __future__ import annotations
+
+from typing import Sequence
+
+import numpy as np
+
+from d5rl.datasets.episode import Episode
+from d5rl.envs.kitchen.subtasks import PARTIAL, SUBTASK_NAMES
+
+COMBINATIONS: tuple[tuple[str, str, str, str], ...] = (
+    ("microwave", "kettle", "light switch", "slide cabinet"),
+    ("microwave", "kettle", "bottom burner", "top burner"),
+    ("microwave", "kettle", "bottom burner", "slide cabinet"),
+    ("microwave", "kettle", "bottom burner", "hinge cabinet"),
+    ("microwave", "kettle", "top burner", "light switch"),
+    ("microwave", "kettle", "top burner", "hinge cabinet"),
+    ("microwave", "kettle", "light switch", "hinge cabinet"),
+    ("microwave", "kettle", "slide cabinet", "hinge cabinet"),
+    ("microwave", "bottom burner", "top burner", "light switch"),
+    ("microwave", "bottom burner", "light switch", "slide cabinet"),
+    ("microwave", "top burner", "light switch", "slide cabinet"),
+    ("microwave", "light switch", "slide cabinet", "hinge cabinet"),
+    ("microwave", "bottom burner", "slide cabinet", "hinge cabinet"),
+    ("kettle", "bottom burner", "top burner", "light switch"),
+    ("kettle", "bottom burner", "light switch", "slide cabinet"),
+    ("kettle", "bottom burner", "slide cabinet", "hinge cabinet"),
+    ("kettle", "top burner", "light switch", "hinge cabinet"),
+    ("kettle", "light switch", "slide cabinet", "hinge cabinet"),
+    ("kettle", "bottom burner", "top burner", "hinge cabinet"),
+    ("bottom burner", "top burner", "light switch", "slide cabinet"),
+    ("bottom burner", "top burner", "slide cabinet", "hinge cabinet"),
+    ("top burner", "light switch", "slide cabinet", "hinge cabinet"),
+)
+assert all(set(c) != set(PARTIAL) for c in COMBINATIONS)
+MAX_STEPS = 280
+DEFAULT_CAMERAS = ("overview", "wrist")
+
+
+class KitchenStandardGenerator:
+    """Episode generator (see the module docstring)."""
+
+    version = "kitchen-standard-demos-1"
+
+    def __init__(self, task_id: str | None = None, max_steps: int = MAX_STEPS):
+        from d5rl.envs.kitchen.task import KitchenEnv
+
+        self.env = KitchenEnv(obs_mode="state", tasks=COMBINATIONS[0])
+        self.max_steps = int(max_steps)
+
+    def episode(self, index: int, rng: np.random.Generator) -> Episode:
+        from d5rl.envs.kitchen.demonstrator import Demonstrator
+
+        combo_index = index % len(COMBINATIONS)
+        return self.demonstrate(COMBINATIONS[combo_index], rng, meta={"combination": combo_index})
+
+    def demonstrate(self, subtasks: Sequence[str], rng: np.random.Generator, meta: dict | None = None) -> Episode:
+        from d5rl.envs.kitchen.demonstrator import Demonstrator
+
+        env = self.env
+        cols = np.array([SUBTASK_NAMES.index(s) for s in subtasks])
+        env.reset(seed=int(rng.integers(2**31)))
+        policy = Demonstrator(env, subtasks, rng)
+        states, proprio, actions, completed = [env.get_state()], [env.data.qpos[:9].astype(np.float32)], [], []
+        for _ in range(self.max_steps):
+            action = policy.act()
+            if policy.finished:
+                break
+            env.step(action)
+            actions.append(action)
+            states.append(env.get_state())
+            proprio.append(env.data.qpos[:9].astype(np.float32))
+            completed.append(env.completed())
+        t = len(actions)
+        completed_arr = np.asarray(completed, dtype=bool).reshape(t, len(SUBTASK_NAMES))
+        timeouts = np.zeros(t, dtype=bool)
+        timeouts[-1] = True  # the demonstration ends here; no terminal state in the MDP
+        solved = completed_arr[:, cols].any(axis=0)
+        arrays = {
+            "observations/proprio": np.asarray(proprio, dtype=np.float32),
+            "actions": np.asarray(actions, dtype=np.float32).reshape(t, 9),
+            "rewards": completed_arr[:, cols].sum(axis=1).astype(np.float32),
+            "terminals": np.zeros(t, dtype=bool),
+            "timeouts": timeouts,
+            "states": np.asarray(states, dtype=np.float64),
+            "infos/completed": completed_arr,
+        }
+        info = {
+            "subtasks": list(subtasks),
+            "solved": [s for s, ok in zip(subtasks, solved) if ok],
+            "num_solved": int(solved.sum()),
+            "style": dict(vars(policy.style)) if hasattr(policy.style, "__dict__") else {},
+        }
+        return Episode(arrays, {**(meta or {}), **info})
+
+
+def relabel(spec, arrays) -> dict[str, np.ndarray]:
+    """A task's rewards on the shared dataset: how many of *its* four subtasks are in their goal
+    configuration after each transition (``infos/completed``)."""
+    tasks = spec.env_kwargs["tasks"]
+    cols = [SUBTASK_NAMES.index(t) for t in tasks]
+    completed = np.asarray(arrays["infos/completed"])
+    return {"rewards": completed[:, cols].sum(axis=1).astype(np.float32)}
+
+
+# --- rendering stored states ----------------------------------------------------------------------
+_RENDER_ENV = {}
+
+
+def _render_env(size: int):
+    from d5rl.envs.kitchen.task import KitchenEnv
+
+    if size not in _RENDER_ENV:
+        _RENDER_ENV[size] = KitchenEnv(obs_mode="pixels", image_size=size)
+    return _RENDER_ENV[size]
+
+
+def render_states(env, states: np.ndarray, cameras: Sequence[str] = DEFAULT_CAMERAS, size: int = 64):
+    """``{camera: uint8 (N, size, size, 3)}`` for stored simulator states (one row per state)."""
+    states = np.asarray(states, dtype=np.float64)
+    out = {c: np.empty((len(states), size, size, 3), np.uint8) for c in cameras}
+    for i, s in enumerate(states):
+        env.set_state(s)
+        for c in cameras:
+            out[c][i] = env.render_camera_image(c, size, size)
+    return out
+
+
+def render_episode(arrays: dict, meta: dict, cameras: Sequence[str] = DEFAULT_CAMERAS, size: int = 64) -> dict:
+    """Derived arrays of one stored episode: ``observations/pixels/<camera>``."""
+    frames = render_states(_render_env(int(size)), arrays["states"], cameras, int(size))
+    return {f"observations/pixels/{c}": v for c, v in frames.items()}
+
+
+def renders(spec, root, manifest, *, episodes: int, workers: int | None = None, progress: bool = True,
+            cameras: Sequence[str] = DEFAULT_CAMERAS, size: int = 64, render: bool = True) -> list:
+    """``DatasetSpec.derived``: camera frames of the stored states (cached next to the dataset).
+
+    ``render=False`` loads states and proprioception only."""
+    if not render:
+        return []
+    from d5rl.datasets.render_cache import ensure_render_cache
+
+    return [ensure_render_cache(root, manifest, "d5rl.envs.kitchen.data:render_episode",
+                                {"cameras": tuple(cameras), "size": int(size)},
+                                name=f"{'+'.join(cameras)}-{int(size)}x{int(size)}", episodes=episodes,
+                                workers=workers, progress=progress)]

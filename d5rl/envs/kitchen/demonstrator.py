@@ -1,0 +1,427 @@
+"""A scripted, human-like demonstrator for the seven kitchen subtasks.
+
+Each subtask is a short script of *phases* in task space: a target position and
+orientation of the gripper's ``end_effector`` site (possibly recomputed every step from
+the object's current state, e.g. along a door's arc), a gripper command and a
+condition that ends the phase.  A resolved-rate controller (damped least squares on
+the site Jacobian, with a null-space pull to a comfortable posture) turns the task-space
+error into joint velocities, which are written as the env's normalized actions.
+
+Human-like variation is drawn per episode and per phase from the caller's generator:
+overall speed, grasp/approach offsets, a random via point before each approach, brief
+pauses, and smoothed action noise.  Everything is a pure function of the generator.
+"""
+
+from __future__ import annotations
+
+import dataclasses
+from typing import Callable, Iterator
+
+import mujoco
+import numpy as np
+
+from d5rl.envs.kitchen import model as km
+from d5rl.envs.kitchen.task import ACTION_SCALE
+
+OPEN, CLOSE = 1.0, -1.0
+
+
+def rot_x(a: float) -> np.ndarray:
+    c, s = np.cos(a), np.sin(a)
+    return np.array([[1, 0, 0], [0, c, -s], [0, s, c]])
+
+
+def rot_y(a: float) -> np.ndarray:
+    c, s = np.cos(a), np.sin(a)
+    return np.array([[c, 0, s], [0, 1, 0], [-s, 0, c]])
+
+
+def rot_z(a: float) -> np.ndarray:
+    c, s = np.cos(a), np.sin(a)
+    return np.array([[c, -s, 0], [s, c, 0], [0, 0, 1]])
+
+
+# Gripper orientations (columns: site x, y, z axes in the world).  The site's z axis is the
+# pointing direction of the gripper, its y axis the direction the fingers open along.
+R_FORWARD = np.array([[0.0, 1, 0], [0, 0, 1], [1, 0, 0]])  # point +y, fingers open along x
+R_FORWARD_FLAT = R_FORWARD @ rot_z(-np.pi / 2)  # point +y, fingers open along z (joint 7 stays in range)
+R_DOWN = np.array([[-1.0, 0, 0], [0, 1, 0], [0, 0, -1]])  # point down, fingers open along y
+R_DOWN_X = np.array([[0.0, 1, 0], [1, 0, 0], [0, 0, -1]])  # point down, fingers (and palm) along x
+# The finger pads span -0.044..+0.050 m along the site's z axis: the site sits at the pads' middle and
+# the fingertips reach 5 cm beyond it.
+FINGERTIP = 0.05
+
+
+@dataclasses.dataclass
+class Phase:
+    """One motion: go to ``target(ctx) -> (pos, rot)`` with the gripper at ``grip``."""
+
+    name: str
+    target: Callable[["Context"], tuple[np.ndarray, np.ndarray]]
+    grip: float = OPEN
+    tol: float = 0.015  # position tolerance (m) when no ``done`` is given
+    rot_tol: float = 0.12  # orientation tolerance (rad)
+    done: Callable[["Context"], bool] | None = None
+    max_steps: int = 40
+    speed: float = 1.0  # multiplies the controller's speed limits
+    freeze: bool = False  # evaluate ``target`` once when the phase starts (relative moves)
+
+
+class Context:
+    """What a script reads: the model/data, object accessors and this episode's variation."""
+
+    def __init__(self, env, rng: np.random.Generator):
+        self.env = env
+        self.model, self.data = env.model, env.data
+        self.rng = rng
+        self._site = env.model.site(km.END_EFFECTOR_SITE).id
+
+    def site(self, name: str) -> np.ndarray:
+        return self.data.site_xpos[self.model.site(name).id].copy()
+
+    def body_pos(self, name: str) -> np.ndarray:
+        return self.data.xpos[self.model.body(name).id].copy()
+
+    def body_mat(self, name: str) -> np.ndarray:
+        return self.data.xmat[self.model.body(name).id].reshape(3, 3).copy()
+
+    def joint(self, name: str) -> float:
+        return float(self.data.qpos[self.model.joint(name).qposadr[0]])
+
+    @property
+    def ee_pos(self) -> np.ndarray:
+        return self.data.site_xpos[self._site].copy()
+
+    @property
+    def ee_rot(self) -> np.ndarray:
+        return self.data.site_xmat[self._site].reshape(3, 3).copy()
+
+    def jitter(self, scale: float) -> np.ndarray:
+        return self.rng.normal(0.0, scale, size=3)
+
+
+# --- the controller ------------------------------------------------------------------------------
+def orientation_error(r_target: np.ndarray, r: np.ndarray) -> np.ndarray:
+    """Rotation vector taking ``r`` to ``r_target`` (world frame)."""
+    qt, qc, qe = np.zeros(4), np.zeros(4), np.zeros(4)
+    mujoco.mju_mat2Quat(qt, np.ascontiguousarray(r_target).ravel())
+    mujoco.mju_mat2Quat(qc, np.ascontiguousarray(r).ravel())
+    mujoco.mju_negQuat(qe, qc)
+    q = np.zeros(4)
+    mujoco.mju_mulQuat(q, qt, qe)
+    if q[0] < 0:
+        q = -q
+    angle = 2 * np.arccos(np.clip(q[0], -1, 1))
+    s = np.linalg.norm(q[1:])
+    return np.zeros(3) if s < 1e-9 else q[1:] / s * angle
+
+
+class Controller:
+    """Resolved-rate control of the end-effector site, output as normalized joint velocities."""
+
+    # The position servos reach about half the commanded joint velocity within a 0.08 s step
+    # (measured: action 0.5 -> 0.50 rad/s on the shoulder, 0.63 rad/s on the wrist).
+    TRACKING = 0.5
+
+    def __init__(self, env, max_lin: float = 0.6, max_ang: float = 1.5, gain: float = 4.0, damping: float = 0.05):
+        self.env = env
+        self.model, self.data = env.model, env.data
+        self.site = env.model.site(km.END_EFFECTOR_SITE).id
+        self.max_lin, self.max_ang, self.gain, self.damping = max_lin, max_ang, gain, damping
+        # a comfortable posture for the null space: the rest pose, shoulder lifted off its limit
+        self.posture = km.INIT_QPOS[:7] + np.array([0.0, 0.25, 0.0, 0.0, 0.0, 0.0, 0.0])
+        self.lo = env.model.jnt_range[:7, 0].copy()
+        self.hi = env.model.jnt_range[:7, 1].copy()
+        self.margin = 0.03
+        self._jacp = np.zeros((3, env.model.nv))
+        self._jacr = np.zeros((3, env.model.nv))
+
+    def action(self, pos: np.ndarray, rot: np.ndarray, grip: float, speed: float = 1.0) -> np.ndarray:
+        d = self.data
+        mujoco.mj_jacSite(self.model, d, self._jacp, self._jacr, self.site)
+        jac = np.vstack([self._jacp[:, :7], self._jacr[:, :7]])
+        ep = pos - d.site_xpos[self.site]
+        er = orientation_error(rot, d.site_xmat[self.site].reshape(3, 3))
+        v = self.gain * ep
+        w = self.gain * er
+        lin_lim, ang_lim = self.max_lin * speed, self.max_ang * speed
+        if np.linalg.norm(v) > lin_lim:
+            v *= lin_lim / np.linalg.norm(v)
+        if np.linalg.norm(w) > ang_lim:
+            w *= ang_lim / np.linalg.norm(w)
+        twist = np.concatenate([v, w])
+        q = d.qpos[:7]
+        rest = self.posture - q
+        free = np.ones(7, dtype=bool)
+        for _ in range(3):  # drop joints that would be pushed further into their limits, re-solve
+            jf = jac * free
+            jjt = jf @ jf.T + self.damping**2 * np.eye(6)
+            qdot = jf.T @ np.linalg.solve(jjt, twist)
+            null = np.diag(free.astype(float)) - jf.T @ np.linalg.solve(jjt, jf)
+            qdot += null @ (0.5 * rest)
+            blocked = ((q <= self.lo + self.margin) & (qdot < 0)) | ((q >= self.hi - self.margin) & (qdot > 0))
+            if not (blocked & free).any():
+                break
+            free &= ~blocked
+        qdot[~free] = 0.0
+        act = np.empty(9)
+        act[:7] = qdot / (ACTION_SCALE * self.TRACKING)
+        act[7:] = grip
+        return np.clip(act, -1.0, 1.0)
+
+    def reached(self, pos: np.ndarray, rot: np.ndarray, tol: float, rot_tol: float) -> bool:
+        d = self.data
+        ep = np.linalg.norm(pos - d.site_xpos[self.site])
+        er = np.linalg.norm(orientation_error(rot, d.site_xmat[self.site].reshape(3, 3)))
+        return ep < tol and er < rot_tol
+
+
+# --- subtask scripts ----------------------------------------------------------------------------
+def _approach_dir(rot: np.ndarray) -> np.ndarray:
+    return rot[:, 2]
+
+
+def _never(ctx: Context) -> bool:
+    return False
+
+
+def _hold(name: str, grip: float, steps: int) -> Phase:
+    """Stay where the gripper is for ``steps`` steps (e.g. while the fingers close)."""
+    return Phase(name, lambda c: (c.ee_pos, c.ee_rot), grip=grip, done=_never, max_steps=steps, freeze=True)
+
+
+def _fixed(pos: np.ndarray, rot: np.ndarray):
+    pos, rot = np.array(pos, dtype=float), np.array(rot, dtype=float)
+    return lambda ctx: (pos, rot)
+
+
+def _grasp_and_swing(ctx: Context, hinge_body: str, handle_site: str, joint: str, goal: float, rot: np.ndarray,
+                     lead: float, depth: float, wrist_follow: float = 0.5, dz: tuple[float, float] = (-0.04, 0.04)
+                     ) -> Iterator[Phase]:
+    """Grasp a handle on a hinged door and swing it along its arc to ``goal`` (joint value)."""
+    handle = ctx.site(handle_site) + np.array([0, 0, ctx.rng.uniform(*dz)])
+    n = _approach_dir(rot)
+    yield Phase("pre-grasp", _fixed(handle - (0.12 + ctx.rng.uniform(0, 0.04)) * n, rot), tol=0.03, rot_tol=0.25)
+    yield Phase("reach", _fixed(handle + depth * n, rot), tol=0.012, max_steps=30, speed=0.8)
+    yield Phase("grasp", _fixed(handle + depth * n, rot), grip=CLOSE, done=_never, max_steps=4)
+    hinge = ctx.body_pos(hinge_body)
+    q0 = ctx.joint(joint)
+    grip_offset = (handle + depth * n) - hinge
+    sign = np.sign(goal - q0)
+
+    def swing(c: Context):
+        q = c.joint(joint)
+        qt = q + sign * lead
+        qt = min(qt, goal) if sign > 0 else max(qt, goal)
+        # the handle is a vertical bar: the fingers can slide around it, so the hand only turns
+        # with part of the door's rotation (less arm reconfiguration, as people do)
+        return hinge + rot_z(qt - q0) @ grip_offset, rot_z(wrist_follow * (qt - q0)) @ rot
+
+    yield Phase("swing", swing, grip=CLOSE, done=lambda c: sign * (c.joint(joint) - goal) >= -0.02, max_steps=50)
+    yield _hold("release", OPEN, 3)
+    yield Phase("retreat", lambda c: (c.ee_pos - 0.12 * c.ee_rot[:, 2], c.ee_rot), tol=0.04, rot_tol=9, max_steps=15, freeze=True)
+
+
+def microwave(ctx: Context) -> Iterator[Phase]:
+    yaw = np.arctan2(-ctx.body_mat("microdoorroot")[0, 1], ctx.body_mat("microdoorroot")[1, 1])
+    rot = rot_z(yaw) @ R_FORWARD
+    yield from _grasp_and_swing(ctx, "microdoorroot", "microhandle_site", "microwave", -0.66, rot, 0.4, 0.015)
+
+
+def hinge_cabinet(ctx: Context) -> Iterator[Phase]:
+    yield from _grasp_and_swing(ctx, "hingerightdoor", "hinge_site2", "right_hinge_cabinet", 1.6, R_FORWARD, 0.35,
+                                0.015, dz=(-0.10, -0.03))
+
+
+def slide_cabinet(ctx: Context) -> Iterator[Phase]:
+    handle = ctx.site("slide_site") + np.array([0, 0, ctx.rng.uniform(-0.05, 0.05)])
+    rot = R_FORWARD
+    n = _approach_dir(rot)
+    yield Phase("pre-grasp", _fixed(handle - (0.12 + ctx.rng.uniform(0, 0.04)) * n, rot), tol=0.03, rot_tol=0.25)
+    yield Phase("reach", _fixed(handle + 0.015 * n, rot), tol=0.012, max_steps=30, speed=0.8)
+    yield Phase("grasp", _fixed(handle + 0.015 * n, rot), grip=CLOSE, done=_never, max_steps=4)
+    target = ctx.rng.uniform(0.36, 0.42)
+
+    def pull(c: Context):
+        q = c.joint("slide_cabinet")
+        return handle + 0.015 * n + np.array([min(q + 0.12, target), 0, 0]), rot
+
+    yield Phase("slide", pull, grip=CLOSE, done=lambda c: c.joint("slide_cabinet") >= target - 0.03, max_steps=50,
+                speed=0.7)
+    yield _hold("release", OPEN, 3)
+    yield Phase("retreat", lambda c: (c.ee_pos - 0.12 * n, rot), tol=0.04, rot_tol=9, max_steps=15, freeze=True)
+
+
+def _knob(ctx: Context, knob_body: str, joint: str, goal: float) -> Iterator[Phase]:
+    # the knob's ridge sticks out 3.6 cm from its plate; the fingertips stop just short of the plate
+    plate = ctx.body_pos(knob_body) + np.array([0, -0.021, 0])
+    center = plate - np.array([0, FINGERTIP + 0.008, 0])
+    rot = R_FORWARD
+    n = _approach_dir(rot)
+    yield Phase("pre-grasp", _fixed(center - (0.10 + ctx.rng.uniform(0, 0.04)) * n, rot), tol=0.03, rot_tol=0.25)
+    yield Phase("reach", _fixed(center, rot), tol=0.01, max_steps=30, speed=0.8)
+    yield Phase("grasp", _fixed(center, rot), grip=CLOSE, done=_never, max_steps=4)
+
+    def turn(c: Context):
+        angle = -c.joint(joint)  # the knob turns about -y; the gripper turns about +y
+        return center, rot_y(min(angle + 0.4, -goal + 0.3)) @ rot
+
+    yield Phase("turn", turn, grip=CLOSE, done=lambda c: c.joint(joint) <= goal + 0.1, max_steps=40, speed=0.8)
+    yield _hold("release", OPEN, 3)
+    yield Phase("retreat", lambda c: (c.ee_pos - 0.10 * n, c.ee_rot), tol=0.04, rot_tol=9, max_steps=15, freeze=True)
+
+
+def bottom_burner(ctx: Context) -> Iterator[Phase]:
+    yield from _knob(ctx, "knob 2", "knob_Joint_2", -1.0)
+
+
+def top_burner(ctx: Context) -> Iterator[Phase]:
+    yield from _knob(ctx, "knob 4", "knob_Joint_4", -1.0)
+
+
+def light_switch(ctx: Context) -> Iterator[Phase]:
+    tip = ctx.site("light_site")
+    rot = R_FORWARD
+    side = np.array([0.05 + ctx.rng.uniform(0, 0.01), 0.0, ctx.rng.uniform(-0.005, 0.005)])
+    yield Phase("pre-push", _fixed(tip + side + np.array([0, -0.10, 0]), rot), grip=CLOSE, tol=0.03, rot_tol=0.25)
+    yield Phase("reach", _fixed(tip + side + np.array([0, -0.01, 0]), rot), grip=CLOSE, tol=0.012, max_steps=30,
+                speed=0.8)
+    yield Phase("push", _fixed(tip + np.array([-0.12, -0.01, side[2]]), rot), grip=CLOSE,
+                done=lambda c: c.joint("light_switch") <= -0.6, max_steps=40, speed=0.8)
+    yield Phase("retreat", lambda c: (c.ee_pos + np.array([0, -0.12, 0]), rot), grip=CLOSE, tol=0.04, rot_tol=9,
+                max_steps=15, freeze=True)
+
+
+KETTLE_GOAL_HANDLE = np.array([-0.234, 0.748, 1.879])  # handle site with the kettle at its goal pose
+
+
+KETTLE_GOAL = np.array([-0.23, 0.75, 1.62])  # kettle body position at its goal pose
+KETTLE_HALF = 0.122  # half-width of the kettle's base
+
+
+def kettle(ctx: Context) -> Iterator[Phase]:
+    """Slide the kettle from the bottom-left to the top-left burner, pushing its base from behind.
+
+    (A pinch on the round handle lets the kettle swing about the handle; pushing low on the base
+    keeps it upright, like nudging it across the stove.)"""
+    rot = R_DOWN_X  # the hand is thin (+-4.4 cm) across its fingers' axis
+    body = ctx.body_pos("kettleroot")
+    height = 1.62 + ctx.rng.uniform(0.045, 0.06) + FINGERTIP  # fingertips 4.5-6 cm above the stove
+    dx = ctx.rng.uniform(-0.02, 0.02)
+    behind = np.array([body[0] + dx, body[1] - KETTLE_HALF - 0.04, height])
+    yield Phase("pre-push", _fixed(behind + [0, -0.02, 0.18], rot), grip=CLOSE, tol=0.03, rot_tol=0.2)
+    yield Phase("descend", _fixed(behind, rot), grip=CLOSE, tol=0.015, max_steps=25, speed=0.8)
+    goal = KETTLE_GOAL + np.array([ctx.rng.uniform(-0.01, 0.01), ctx.rng.uniform(-0.01, 0.02), 0.0])
+    push_to = np.array([goal[0] + dx, goal[1] - KETTLE_HALF - 0.03, height])
+    yield Phase("push", _fixed(push_to, rot), grip=CLOSE, tol=0.012, max_steps=45, speed=ctx.rng.uniform(0.3, 0.4))
+    yield Phase("retreat", lambda c: (c.ee_pos + np.array([0, -0.06, 0.12]), rot), grip=CLOSE, tol=0.04, rot_tol=9,
+                max_steps=15, freeze=True)
+
+
+SCRIPTS: dict[str, Callable[[Context], Iterator[Phase]]] = {
+    "microwave": microwave,
+    "kettle": kettle,
+    "bottom burner": bottom_burner,
+    "top burner": top_burner,
+    "light switch": light_switch,
+    "slide cabinet": slide_cabinet,
+    "hinge cabinet": hinge_cabinet,
+}
+
+
+# --- the policy -----------------------------------------------------------------------------------
+@dataclasses.dataclass(frozen=True)
+class Style:
+    """One operator's habits for an episode (drawn by :meth:`Style.sample`)."""
+
+    speed: float  # multiplies every phase's speed
+    noise: float  # std of the smoothed action noise
+    pause_prob: float  # chance of a short pause before a phase
+    via_prob: float  # chance of a detour via a random point before an approach
+
+    @staticmethod
+    def sample(rng: np.random.Generator) -> "Style":
+        return Style(
+            speed=float(rng.uniform(0.8, 1.15)),
+            noise=float(rng.uniform(0.02, 0.08)),
+            pause_prob=float(rng.uniform(0.0, 0.25)),
+            via_prob=float(rng.uniform(0.0, 0.5)),
+        )
+
+
+class Demonstrator:
+    """Scripted policy solving ``subtasks`` in order; call :meth:`act` once per env step.
+
+    The env must be reset before the policy is made.  ``rng`` drives every random choice.
+    """
+
+    def __init__(self, env, subtasks, rng: np.random.Generator, style: Style | None = None):
+        self.env = env
+        self.subtasks = list(subtasks)
+        self.rng = rng
+        self.style = style or Style.sample(rng)
+        self.ctx = Context(env, rng)
+        self.ctrl = Controller(env)
+        self._noise = np.zeros(9)
+        self._queue = self._phases()
+        self._phase: Phase | None = None
+        self._frozen = None
+        self._steps = 0
+        self._pause = 0
+        self.current_subtask: str | None = None
+        self.finished = False
+
+    def _phases(self) -> Iterator[Phase]:
+        for name in self.subtasks:
+            self.current_subtask = name
+            first = True
+            for ph in SCRIPTS[name](self.ctx):
+                if first and self.rng.random() < self.style.via_prob:
+                    via = self.ctx.ee_pos + self.rng.uniform([-0.08, -0.1, -0.02], [0.08, 0.02, 0.1])
+                    yield Phase("via", _fixed(via, self.ctx.ee_rot), grip=ph.grip, tol=0.04, rot_tol=9, max_steps=8)
+                first = False
+                yield ph
+        self.current_subtask = None
+
+    def _next_phase(self) -> None:
+        try:
+            self._phase = next(self._queue)
+        except StopIteration:
+            self._phase = None
+            self.finished = True
+            return
+        self._steps = 0
+        self._frozen = self._phase.target(self.ctx) if self._phase.freeze else None
+        if self.rng.random() < self.style.pause_prob:
+            self._pause = int(self.rng.integers(1, 5))
+
+    def _phase_over(self) -> bool:
+        ph = self._phase
+        if self._steps >= ph.max_steps:
+            return True
+        if ph.done is not None:
+            return ph.done(self.ctx)
+        pos, rot = self._frozen if self._frozen is not None else ph.target(self.ctx)
+        return self.ctrl.reached(pos, rot, ph.tol, ph.rot_tol)
+
+    def act(self) -> np.ndarray:
+        if self._phase is None and not self.finished:
+            self._next_phase()
+        while self._phase is not None and self._phase_over():
+            self._next_phase()
+        if self._phase is None:  # all done: hold still, gripper open
+            hold = np.zeros(9)
+            hold[7:] = OPEN
+            return hold
+        ph = self._phase
+        pos, rot = self._frozen if self._frozen is not None else ph.target(self.ctx)
+        self._steps += 1
+        if self._pause > 0:
+            self._pause -= 1
+            act = np.zeros(9)
+            act[7:] = ph.grip
+        else:
+            act = self.ctrl.action(pos, rot, ph.grip, ph.speed * self.style.speed)
+        self._noise = 0.7 * self._noise + 0.3 * self.rng.normal(0.0, self.style.noise, size=9)
+        act[:7] += self._noise[:7]
+        return np.clip(act, -1.0, 1.0).astype(np.float32)
