@@ -127,7 +127,7 @@ class SceneOptions:
     """Choices that shape the compiled model.  Physics never depends on them."""
 
     fast_render: bool = True  # no shadows/MSAA, small offscreen buffer (see apply_fast_render)
-    decimate_cell: float | None = 0.006  # vertex-cluster size (m) for large visual meshes; None keeps them
+    decimate_cell: float | None = 0.01  # vertex-cluster size (m) for large visual meshes; None keeps them
     decimate_min_faces: int = 2000  # only meshes with more triangles than this are decimated
     overview: LookAtCamera = OVERVIEW_CAMERA
     wrist: WristCamera = WristCamera()
