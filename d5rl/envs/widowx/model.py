@@ -549,6 +549,8 @@ def _body_bbox(model: mujoco.MjModel, body: int) -> tuple[np.ndarray, np.ndarray
     corners = []
     signs = np.array([[sx, sy, sz] for sx in (-1, 1) for sy in (-1, 1) for sz in (-1, 1)], dtype=float)
     for g in np.flatnonzero(model.geom_bodyid == body):
+        if model.geom_group[g] == 2:  # visual-only mesh: the collision pieces define the extent
+            continue
         rot = np.empty(9)
         mujoco.mju_quat2Mat(rot, model.geom_quat[g])
         local = model.geom_aabb[g][:3] + signs * model.geom_aabb[g][3:]
