@@ -1,0 +1,50 @@
+"""Reference offline-RL agents in JAX (install the ``train`` extra: ``pip install d5rl[train]``).
+
+Every agent has the same interface::
+
+    agent = IQLAgent.create(seed, example_observations, example_actions, config)
+    agent, metrics = agent.update(batch)        # jitted; batch: observations, actions, rewards, masks, next_observations
+    actions = agent.sample_actions(obs, seed=key)   # exploration
+    actions = agent.eval_actions(obs)               # evaluation
+
+``get_agent(name)`` returns ``(AgentClass, get_config)`` for one of :data:`AGENTS`.
+"""
+
+from __future__ import annotations
+
+import importlib
+
+from d5rl.errors import D5RLError
+
+# name -> (module, class)
+AGENTS = {
+    "bc": ("d5rl.agents.bc", "BCAgent"),
+    "iql": ("d5rl.agents.iql", "IQLAgent"),
+    "cql": ("d5rl.agents.cql", "CQLAgent"),
+    "calql": ("d5rl.agents.calql", "CalQLAgent"),
+    "td3bc": ("d5rl.agents.td3bc", "TD3BCAgent"),
+    "rlpd": ("d5rl.agents.rlpd", "RLPDAgent"),
+    "ddpm_bc": ("d5rl.agents.ddpm_bc", "DDPMBCAgent"),
+    "idql": ("d5rl.agents.idql", "IDQLAgent"),
+}
+
+
+class UnknownAgentError(D5RLError, KeyError):
+    def __str__(self) -> str:
+        return Exception.__str__(self)
+
+
+def get_agent(name: str):
+    """``(AgentClass, get_config)`` for an agent name (``bc``, ``iql``, ``cql``, ...)."""
+    key = name.lower().replace("-", "_").replace("+", "")
+    key = {"td3_bc": "td3bc", "ddpmbc": "ddpm_bc", "cal_ql": "calql"}.get(key, key)
+    if key not in AGENTS:
+        raise UnknownAgentError(f"unknown agent {name!r}", f"choose one of {', '.join(AGENTS)}")
+    try:
+        module = importlib.import_module(AGENTS[key][0])
+    except ImportError as e:  # jax/flax/optax missing
+        from d5rl.errors import MissingDependencyError
+
+        raise MissingDependencyError(f"agent {key} needs JAX, Flax and Optax ({e})",
+                                     "install the training extra: pip install 'd5rl[train]'") from e
+    return getattr(module, AGENTS[key][1]), module.get_config

@@ -137,3 +137,8 @@ def prepare_example(example_observations, example_actions):
         ex_act = ex_act[None]
         ex_obs = jax.tree_util.tree_map(lambda x: x[None], ex_obs)
     return ex_obs, ex_act
+
+
+def copy_tree(tree):
+    """A copy with fresh buffers (target networks must not alias the online ones: buffers get donated)."""
+    return jax.tree_util.tree_map(lambda x: jnp.array(x, copy=True), tree)

@@ -136,7 +136,11 @@ class Ensemble(nn.Module):
 
 
 class Critic(nn.Module):
-    """Q(s, a) ensemble sharing one observation encoder: returns ``(num_qs, batch)``."""
+    """Q(s, a) ensemble sharing one observation encoder: returns ``(num_qs, batch)``.
+
+    ``encode`` and ``head`` split the call so that many actions per observation
+    (CQL, IDQL) reuse one encoding.
+    """
 
     encoder: nn.Module
     hidden_dims: Sequence[int]
@@ -144,11 +148,17 @@ class Critic(nn.Module):
     layer_norm: bool = False
     dropout_rate: float | None = None
 
-    @nn.compact
+    def setup(self):
+        self.heads = Ensemble(self.hidden_dims, self.num_qs, self.layer_norm, self.dropout_rate)
+
+    def encode(self, obs):
+        return self.encoder(obs)
+
+    def head(self, features, actions, train: bool = False):
+        return self.heads(jnp.concatenate([features, actions], axis=-1), train)
+
     def __call__(self, obs, actions, train: bool = False):
-        h = self.encoder(obs)
-        x = jnp.concatenate([h, actions], axis=-1)
-        return Ensemble(self.hidden_dims, self.num_qs, self.layer_norm, self.dropout_rate)(x, train)
+        return self.head(self.encode(obs), actions, train)
 
 
 class ValueCritic(nn.Module):
@@ -199,6 +209,12 @@ class Gaussian:
 
     def sample(self, key):
         return self.sample_and_log_prob(key)[0]
+
+    def sample_n_and_log_prob(self, key, n: int):
+        """``n`` samples per distribution: shapes ``(n, *batch, A)`` and ``(n, *batch)``."""
+        wide = Gaussian(jnp.broadcast_to(self.loc, (n,) + self.loc.shape),
+                        jnp.broadcast_to(self.log_std, (n,) + self.log_std.shape), self.tanh)
+        return wide.sample_and_log_prob(key)
 
     def log_prob(self, actions):
         if self.tanh:
@@ -321,7 +337,10 @@ class LNResNet(nn.Module):
 
 
 class DiffusionNoiseModel(nn.Module):
-    """ε_θ(a_t, t | s): Fourier time features → MLP, concatenated with obs features and a_t."""
+    """ε_θ(a_t, t | s): Fourier time features → MLP, concatenated with obs features and a_t.
+
+    ``encode`` once, then ``denoise`` at every diffusion step.
+    """
 
     encoder: nn.Module
     action_dim: int
@@ -330,13 +349,20 @@ class DiffusionNoiseModel(nn.Module):
     time_dim: int = 64
     dropout_rate: float | None = 0.1
 
-    @nn.compact
+    def setup(self):
+        self.time_features = FourierFeatures(self.time_dim)
+        self.time_mlp = MLP((self.time_dim * 2, self.time_dim * 2), activation=nn.swish)
+        self.net = LNResNet(self.num_blocks, self.hidden_dim, self.action_dim, dropout_rate=self.dropout_rate)
+
+    def encode(self, obs):
+        return self.encoder(obs)
+
+    def denoise(self, features, noisy_actions, t, train: bool = False):
+        te = self.time_mlp(self.time_features(t))
+        return self.net(jnp.concatenate([features, noisy_actions, te], axis=-1), train)
+
     def __call__(self, obs, noisy_actions, t, train: bool = False):
-        h = self.encoder(obs)
-        te = FourierFeatures(self.time_dim)(t)
-        te = MLP((self.time_dim * 2, self.time_dim * 2), activation=nn.swish)(te)
-        x = jnp.concatenate([h, noisy_actions, te], axis=-1)
-        return LNResNet(self.num_blocks, self.hidden_dim, self.action_dim, dropout_rate=self.dropout_rate)(x, train)
+        return self.denoise(self.encode(obs), noisy_actions, t, train)
 
 
 def cosine_beta_schedule(num_steps: int, s: float = 0.008):

@@ -20,7 +20,7 @@ import jax
 import jax.numpy as jnp
 
 from d5rl.agents.augment import augment_batch
-from d5rl.agents.common import (ENCODER_DEFAULTS, Agent, check_batch, make_train_state, nonpytree_field,
+from d5rl.agents.common import (copy_tree, ENCODER_DEFAULTS, Agent, check_batch, make_train_state, nonpytree_field,
                                 obs_ndims, prepare_example, split_utd)
 from d5rl.agents.config import Config
 from d5rl.agents.networks import Critic, GaussianPolicy, Temperature, is_pixel_obs, make_encoder, soft_update
@@ -119,7 +119,7 @@ class RLPDAgent(Agent):
         actor = make_train_state(actor_def, k_actor, (ex_obs,), config.actor_lr)
         critic = make_train_state(critic_def, k_critic, (ex_obs, ex_act), config.critic_lr)
         temp = make_train_state(Temperature(config.init_temperature), k_temp, (), config.temp_lr)
-        return cls(rng=rng, actor=actor, critic=critic, target_critic_params=critic.params, temp=temp,
+        return cls(rng=rng, actor=actor, critic=critic, target_critic_params=copy_tree(critic.params), temp=temp,
                    config=config, obs_ndim=obs_ndims(ex_obs))
 
 

@@ -1,0 +1,63 @@
+"""Behaviour cloning: maximise the log-likelihood of the dataset's actions.
+
+The policy is a Gaussian whose mean is tanh-bounded (not a squashed Gaussian),
+so actions at the ±1 bounds have finite likelihood.  Evaluation takes the mean.
+
+Metrics: ``actor/loss`` (negative log-likelihood), ``actor/mse`` (mean vs. data
+action), ``actor/log_std``.
+"""
+
+from __future__ import annotations
+
+from typing import Any
+
+import jax
+import jax.numpy as jnp
+
+from d5rl.agents.augment import augment_batch
+from d5rl.agents.common import ENCODER_DEFAULTS, Agent, make_train_state, nonpytree_field, obs_ndims, prepare_example
+from d5rl.agents.config import Config
+from d5rl.agents.networks import GaussianPolicy, make_encoder
+
+
+class BCAgent(Agent):
+    rng: Any
+    actor: Any
+    config: Config = nonpytree_field()
+    obs_ndim: tuple = nonpytree_field()
+
+    def actor_loss(self, actor_params, batch, key):
+        dist = self.actor.apply_fn({"params": actor_params}, batch["observations"], train=True, rngs={"dropout": key})
+        loss = -dist.log_prob(batch["actions"]).mean()
+        mse = ((dist.mode() - batch["actions"]) ** 2).sum(-1).mean()
+        return loss, {"actor/loss": loss, "actor/mse": mse, "actor/log_std": dist.log_std.mean()}
+
+    def _update(self, batch):
+        rng, aug_key, key = jax.random.split(self.rng, 3)
+        batch = augment_batch(aug_key, batch, self.config)
+        grads, info = jax.grad(self.actor_loss, has_aux=True)(self.actor.params, batch, key)
+        return self.replace(rng=rng, actor=self.actor.apply_gradients(grads=grads)), info
+
+    @classmethod
+    def create(cls, seed: int, example_observations, example_actions, config: Config | None = None):
+        config = get_config() if config is None else config
+        ex_obs, ex_act = prepare_example(example_observations, example_actions)
+        rng, k_actor = jax.random.split(jax.random.PRNGKey(seed))
+        actor_def = GaussianPolicy(make_encoder(config), config.hidden_dims, ex_act.shape[-1], tanh_squash=False,
+                                   log_std_min=config.log_std_min, log_std_max=config.log_std_max,
+                                   state_dependent_std=config.state_dependent_std)
+        actor = make_train_state(actor_def, k_actor, (ex_obs,), config.actor_lr)
+        return cls(rng=rng, actor=actor, config=config, obs_ndim=obs_ndims(ex_obs))
+
+
+def get_config() -> Config:
+    return Config(
+        agent_name="bc",
+        actor_lr=3e-4,  # Adam learning rate (state tasks; D5RL uses 1e-4 for pixel policies)
+        hidden_dims=(256, 256),  # MLP widths of the policy
+        log_std_min=-5.0,  # clip of the policy's log-std
+        log_std_max=2.0,
+        state_dependent_std=True,  # log-std from the network (False = one learned vector)
+        batch_size=256,  # minibatch size (256 state, 64 pixels in D5RL)
+        **ENCODER_DEFAULTS,
+    )

@@ -1,0 +1,116 @@
+"""IDQL: Implicit Diffusion Q-Learning (Hansen-Estruch et al., 2023).
+
+An IQL critic (expectile V, Q → r + γV(s')) and a diffusion behaviour policy
+(:mod:`d5rl.agents.ddpm_bc`), trained independently.  To act, draw
+``num_samples`` actions from the diffusion policy per observation and take the
+one with the highest min-ensemble target Q (D5RL: N = 64, argmax).
+
+Metrics: ``value/loss``, ``value/v``, ``critic/loss``, ``critic/q``,
+``critic/target_q``, ``actor/loss``.
+"""
+
+from __future__ import annotations
+
+from typing import Any
+
+import jax
+import jax.numpy as jnp
+
+from d5rl.agents.augment import augment_batch
+from d5rl.agents.common import copy_tree, ENCODER_DEFAULTS, Agent, make_train_state, nonpytree_field, obs_ndims, prepare_example
+from d5rl.agents.config import Config
+from d5rl.agents.ddpm_bc import diffusion_config, diffusion_loss, ddpm_sample, make_diffusion_actor
+from d5rl.agents.iql import iql_critic_loss, iql_value_loss
+from d5rl.agents.networks import Critic, ValueCritic, make_encoder, soft_update
+
+
+class IDQLAgent(Agent):
+    rng: Any
+    actor: Any
+    target_actor_params: Any
+    critic: Any
+    target_critic_params: Any
+    value: Any
+    config: Config = nonpytree_field()
+    obs_ndim: tuple = nonpytree_field()
+
+    def value_loss(self, value_params, batch):
+        return iql_value_loss(self, value_params, batch)
+
+    def critic_loss(self, critic_params, batch):
+        return iql_critic_loss(self, critic_params, batch)
+
+    def actor_loss(self, actor_params, batch, key):
+        loss = diffusion_loss(self.actor.apply_fn, actor_params, batch["observations"], batch["actions"], key,
+                              self.config.diffusion_steps)
+        return loss, {"actor/loss": loss}
+
+    def _update(self, batch):
+        rng, aug_key, key = jax.random.split(self.rng, 3)
+        batch = augment_batch(aug_key, batch, self.config)
+        cfg = self.config
+        g, value_info = jax.grad(self.value_loss, has_aux=True)(self.value.params, batch)
+        agent = self.replace(rng=rng, value=self.value.apply_gradients(grads=g))
+        g, critic_info = jax.grad(agent.critic_loss, has_aux=True)(agent.critic.params, batch)
+        critic = agent.critic.apply_gradients(grads=g)
+        g, actor_info = jax.grad(agent.actor_loss, has_aux=True)(agent.actor.params, batch, key)
+        actor = agent.actor.apply_gradients(grads=g)
+        agent = agent.replace(
+            critic=critic, target_critic_params=soft_update(agent.target_critic_params, critic.params, cfg.tau),
+            actor=actor, target_actor_params=soft_update(agent.target_actor_params, actor.params, cfg.actor_ema))
+        return agent, {**value_info, **critic_info, **actor_info}
+
+    def _act(self, obs, seed, temperature):
+        cfg, n = self.config, self.config.num_samples
+        p = self.target_actor_params
+        feats = self.actor.apply_fn({"params": p}, obs, method="encode")
+        b = feats.shape[0]
+        feats = jnp.repeat(feats, n, axis=0)  # (B·N, F), N consecutive rows per observation
+        actions = ddpm_sample(self.actor.apply_fn, p, feats, seed, cfg.action_dim, cfg.diffusion_steps,
+                              cfg.clip_sampler, temperature)
+        q_feats = self.critic.apply_fn({"params": self.target_critic_params}, obs, method="encode")
+        q_feats = jnp.repeat(q_feats, n, axis=0)
+        q = self.critic.apply_fn({"params": self.target_critic_params}, q_feats, actions, method="head").min(0)
+        best = jnp.argmax(q.reshape(b, n), axis=1)
+        return actions.reshape(b, n, -1)[jnp.arange(b), best]
+
+    @jax.jit
+    def _sample(self, obs, seed, temperature=1.0):
+        return self._act(obs, seed, temperature)
+
+    @jax.jit
+    def _eval(self, obs, seed):
+        return self._act(obs, seed, 1.0)
+
+    @classmethod
+    def create(cls, seed: int, example_observations, example_actions, config: Config | None = None):
+        config = get_config() if config is None else config
+        ex_obs, ex_act = prepare_example(example_observations, example_actions)
+        config = config.replace(action_dim=int(ex_act.shape[-1]))
+        rng, k_a, k_c, k_v = jax.random.split(jax.random.PRNGKey(seed), 4)
+        actor = make_diffusion_actor(config, k_a, ex_obs, ex_act)
+        critic_def = Critic(make_encoder(config), config.critic_hidden_dims, config.num_qs, config.critic_layer_norm)
+        value_def = ValueCritic(make_encoder(config), config.critic_hidden_dims, config.critic_layer_norm)
+        critic = make_train_state(critic_def, k_c, (ex_obs, ex_act), config.critic_lr)
+        value = make_train_state(value_def, k_v, (ex_obs,), config.value_lr)
+        return cls(rng=rng, actor=actor, target_actor_params=copy_tree(actor.params), critic=critic,
+                   target_critic_params=copy_tree(critic.params), value=value, config=config, obs_ndim=obs_ndims(ex_obs))
+
+
+def get_config() -> Config:
+    return Config(
+        agent_name="idql",
+        critic_lr=3e-4,  # Q Adam lr (IQL / IDQL)
+        value_lr=3e-4,  # V Adam lr (IQL / IDQL)
+        critic_hidden_dims=(256, 256),  # MLP widths of Q and V (IDQL)
+        discount=0.99,  # γ
+        tau=0.005,  # Polyak rate of the target Q
+        expectile=0.7,  # τ of the value expectile (IDQL: 0.7; D5RL sweeps IQL's τ)
+        num_qs=2,  # clipped double Q
+        critic_layer_norm=False,  # LayerNorm in Q and V
+        num_samples=64,  # N actions drawn per observation, the argmax-Q one is taken (D5RL: 64)
+        batch_size=256,  # minibatch size (256 state, 64 pixels in D5RL)
+        action_dim=None,  # set by create() from the example actions
+        **diffusion_config(),
+        **ENCODER_DEFAULTS,
+    )

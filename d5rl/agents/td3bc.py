@@ -1,0 +1,114 @@
+"""TD3+BC (Fujimoto & Gu, 2021): TD3 whose actor loss adds a behaviour-cloning term.
+
+Actor: maximise λ·Q(s, π(s)) − (π(s) − a)², with λ = α / mean|Q| (stop-gradient).
+Critic: clipped double Q with target-policy smoothing noise.  The actor and the
+targets update every ``policy_freq`` critic updates.
+
+Metrics: ``critic/loss``, ``critic/q``, ``critic/target_q``, ``actor/loss``,
+``actor/bc_mse``, ``actor/q``, ``actor/lambda``.
+"""
+
+from __future__ import annotations
+
+from typing import Any
+
+import jax
+import jax.numpy as jnp
+
+from d5rl.agents.augment import augment_batch
+from d5rl.agents.common import copy_tree, ENCODER_DEFAULTS, Agent, make_train_state, nonpytree_field, obs_ndims, prepare_example
+from d5rl.agents.config import Config
+from d5rl.agents.networks import Critic, DeterministicPolicy, make_encoder, soft_update
+
+
+class TD3BCAgent(Agent):
+    rng: Any
+    actor: Any
+    target_actor_params: Any
+    critic: Any
+    target_critic_params: Any
+    config: Config = nonpytree_field()
+    obs_ndim: tuple = nonpytree_field()
+
+    def critic_loss(self, critic_params, batch, key):
+        cfg = self.config
+        next_a = self.actor.apply_fn({"params": self.target_actor_params}, batch["next_observations"])
+        noise = jnp.clip(cfg.policy_noise * jax.random.normal(key, next_a.shape), -cfg.noise_clip, cfg.noise_clip)
+        next_a = jnp.clip(next_a + noise, -1.0, 1.0)
+        next_q = self.critic.apply_fn({"params": self.target_critic_params}, batch["next_observations"], next_a).min(0)
+        target = jax.lax.stop_gradient(batch["rewards"] + cfg.discount * batch["masks"] * next_q)
+        qs = self.critic.apply_fn({"params": critic_params}, batch["observations"], batch["actions"])
+        loss = ((qs - target[None]) ** 2).mean(axis=1).sum()
+        return loss, {"critic/loss": loss, "critic/q": qs.mean(), "critic/target_q": target.mean()}
+
+    def actor_loss(self, actor_params, batch):
+        pi = self.actor.apply_fn({"params": actor_params}, batch["observations"])
+        q = self.critic.apply_fn({"params": self.critic.params}, batch["observations"], pi)[0]
+        lam = jax.lax.stop_gradient(self.config.alpha / (jnp.abs(q).mean() + 1e-8))
+        bc = ((pi - batch["actions"]) ** 2).mean()
+        loss = -lam * q.mean() + bc
+        return loss, {"actor/loss": loss, "actor/bc_mse": bc, "actor/q": q.mean(), "actor/lambda": lam}
+
+    def _update_actor(self, batch):
+        g, info = jax.grad(self.actor_loss, has_aux=True)(self.actor.params, batch)
+        actor = self.actor.apply_gradients(grads=g)
+        tau = self.config.tau
+        return self.replace(actor=actor, target_actor_params=soft_update(self.target_actor_params, actor.params, tau),
+                            target_critic_params=soft_update(self.target_critic_params, self.critic.params, tau)), info
+
+    def _update(self, batch):
+        rng, aug_key, key = jax.random.split(self.rng, 3)
+        batch = augment_batch(aug_key, batch, self.config)
+        g, critic_info = jax.grad(self.critic_loss, has_aux=True)(self.critic.params, batch, key)
+        agent = self.replace(rng=rng, critic=self.critic.apply_gradients(grads=g))
+        empty = {"actor/loss": 0.0, "actor/bc_mse": 0.0, "actor/q": 0.0, "actor/lambda": 0.0}
+        empty = {k: jnp.zeros((), jnp.float32) for k in empty}
+
+        def skip(a):
+            return a, empty
+
+        # critic.step counts critic updates; the first update (step 1) also trains the actor.
+        agent, actor_info = jax.lax.cond((agent.critic.step - 1) % self.config.policy_freq == 0,
+                                         lambda a: a._update_actor(batch), skip, agent)
+        return agent, {**critic_info, **actor_info}
+
+    @jax.jit
+    def _sample(self, obs, seed, temperature=1.0):
+        a = self.actor.apply_fn({"params": self.actor.params}, obs)
+        noise = self.config.exploration_noise * temperature * jax.random.normal(seed, a.shape)
+        return jnp.clip(a + noise, -1.0, 1.0)
+
+    @jax.jit
+    def _eval(self, obs, seed):
+        return self.actor.apply_fn({"params": self.actor.params}, obs)
+
+    @classmethod
+    def create(cls, seed: int, example_observations, example_actions, config: Config | None = None):
+        config = get_config() if config is None else config
+        ex_obs, ex_act = prepare_example(example_observations, example_actions)
+        rng, k_a, k_c = jax.random.split(jax.random.PRNGKey(seed), 3)
+        actor_def = DeterministicPolicy(make_encoder(config), config.hidden_dims, ex_act.shape[-1])
+        critic_def = Critic(make_encoder(config), config.hidden_dims, 2, config.critic_layer_norm)
+        actor = make_train_state(actor_def, k_a, (ex_obs,), config.actor_lr)
+        critic = make_train_state(critic_def, k_c, (ex_obs, ex_act), config.critic_lr)
+        return cls(rng=rng, actor=actor, target_actor_params=copy_tree(actor.params), critic=critic,
+                   target_critic_params=copy_tree(critic.params), config=config, obs_ndim=obs_ndims(ex_obs))
+
+
+def get_config() -> Config:
+    return Config(
+        agent_name="td3bc",
+        actor_lr=3e-4,  # policy Adam lr (TD3+BC paper)
+        critic_lr=3e-4,  # Q Adam lr (TD3+BC paper)
+        hidden_dims=(256, 256),  # MLP widths (TD3+BC paper)
+        discount=0.99,  # γ
+        tau=0.005,  # Polyak rate of the targets
+        alpha=2.5,  # α in λ = α / mean|Q| (TD3+BC paper)
+        policy_noise=0.2,  # std of target-policy smoothing noise (TD3)
+        noise_clip=0.5,  # clip of that noise (TD3)
+        policy_freq=2,  # actor/target update every this many critic updates (TD3)
+        exploration_noise=0.1,  # Gaussian action noise when collecting online data (TD3)
+        critic_layer_norm=False,  # LayerNorm in the critics
+        batch_size=256,  # minibatch size (256 state, 64 pixels in D5RL)
+        **ENCODER_DEFAULTS,
+    )

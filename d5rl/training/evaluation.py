@@ -1,0 +1,124 @@
+"""Evaluation: run episodes in parallel environments with batched policy inference."""
+
+from __future__ import annotations
+
+from pathlib import Path
+from typing import Any, Callable
+
+import gymnasium as gym
+import jax
+import numpy as np
+
+from d5rl.training.envs import env_factory, normalizer
+
+
+def _stack_obs(obs_list):
+    if isinstance(obs_list[0], dict):
+        return {k: np.stack([o[k] for o in obs_list]) for k in obs_list[0]}
+    return np.stack(obs_list)
+
+
+def evaluate(
+    agent,
+    task_id: str,
+    num_episodes: int = 10,
+    seed: int = 0,
+    *,
+    num_envs: int = 1,
+    frame_stack: int = 1,
+    processes: bool = False,
+    video_path: str | Path | None = None,
+    env_fn: Callable[[], gym.Env] | None = None,
+) -> dict[str, Any]:
+    """Mean return, normalized score (if the task has references), success and length over episodes.
+
+    ``num_envs`` environments step in lockstep and the agent acts on all of them in
+    one batch; ``processes=True`` puts each in its own process (gymnasium
+    ``AsyncVectorEnv``).  Episode ``i`` resets with seed ``seed + i``, so results do
+    not depend on ``num_envs``.  ``video_path`` records the first episode.
+    """
+    num_envs = max(1, min(int(num_envs), int(num_episodes)))
+    render = video_path is not None
+    fns = [env_fn or env_factory(task_id, frame_stack, "rgb_array" if (render and i == 0) else None)
+           for i in range(num_envs)]
+    envs = [fn() for fn in fns] if not processes else None
+    vec = gym.vector.AsyncVectorEnv(fns, copy=True) if processes else None
+    returns, lengths, successes, frames = [], [], [], []
+    key = jax.random.PRNGKey(seed)
+    ep = 0
+    try:
+        while ep < num_episodes:
+            n = min(num_envs, num_episodes - ep)
+            seeds = [seed + ep + i for i in range(n)]
+            if processes:
+                obs_b, _ = vec.reset(seed=seeds + [seed + 10**6 + i for i in range(num_envs - n)])
+                obs = [jax.tree_util.tree_map(lambda x: x[i], obs_b) for i in range(n)]
+            else:
+                obs = [envs[i].reset(seed=s)[0] for i, s in enumerate(seeds)]
+            done = np.zeros(n, bool)
+            ret, length, succ = np.zeros(n), np.zeros(n, int), np.zeros(n, bool)
+            if render and ep == 0:
+                frames.append(_render(envs, vec, processes))
+            while not done.all():
+                key, k = jax.random.split(key)
+                live = np.flatnonzero(~done)
+                batch = _stack_obs([obs[i] for i in live])
+                actions = np.asarray(agent.eval_actions(batch, seed=k))
+                if processes:
+                    full = np.zeros((num_envs,) + actions.shape[1:], np.float32)
+                    full[live] = actions
+                    obs_b, r, term, trunc, info = vec.step(full)
+                    for j in live:
+                        obs[j] = jax.tree_util.tree_map(lambda x: x[j], obs_b)
+                        ret[j] += r[j]
+                        length[j] += 1
+                        s = info.get("success")
+                        succ[j] |= bool(s[j]) if s is not None else False
+                        done[j] = term[j] or trunc[j]
+                else:
+                    for a, j in zip(actions, live):
+                        obs[j], r, term, trunc, info = envs[j].step(a)
+                        ret[j] += r
+                        length[j] += 1
+                        succ[j] |= bool(info.get("success", False))
+                        done[j] = term or trunc
+                if render and ep == 0 and not done[0]:
+                    frames.append(_render(envs, vec, processes))
+            returns += list(ret)
+            lengths += list(length)
+            successes += list(succ)
+            ep += n
+    finally:
+        if vec is not None:
+            vec.close()
+        for e in envs or []:
+            e.close()
+    out = {"return": float(np.mean(returns)), "return_std": float(np.std(returns)),
+           "length": float(np.mean(lengths)), "success": float(np.mean(successes)),
+           "episodes": len(returns), "returns": [float(x) for x in returns]}
+    norm = normalizer(task_id) if env_fn is None else None
+    if norm is not None:
+        scores = np.asarray(norm(np.asarray(returns)), np.float64)
+        out["score"] = float(scores.mean())
+        out["score_std"] = float(scores.std())
+    if render and frames:
+        _write_video(Path(video_path), frames)
+        out["video"] = str(video_path)
+    return out
+
+
+def _render(envs, vec, processes):
+    if processes:
+        return np.asarray(vec.call("render")[0])
+    return np.asarray(envs[0].render())
+
+
+def _write_video(path: Path, frames) -> None:
+    import imageio
+
+    path.parent.mkdir(parents=True, exist_ok=True)
+    fps = 20
+    try:
+        imageio.mimwrite(str(path), frames, fps=fps, macro_block_size=1)
+    except Exception:  # noqa: BLE001 - no ffmpeg: fall back to GIF
+        imageio.mimwrite(str(path.with_suffix(".gif")), frames, duration=1000 / fps)

@@ -1,0 +1,78 @@
+"""Run logging: one JSONL and one CSV row per logged step (TensorBoard too if installed)."""
+
+from __future__ import annotations
+
+import csv
+import json
+import math
+from pathlib import Path
+from typing import Any
+
+
+def _tb_writer(log_dir: Path):
+    try:
+        from tensorboardX import SummaryWriter  # type: ignore
+    except ImportError:
+        try:
+            from torch.utils.tensorboard import SummaryWriter  # type: ignore
+        except ImportError:
+            return None
+    try:
+        return SummaryWriter(str(log_dir))
+    except Exception:  # noqa: BLE001 - logging must never kill a run
+        return None
+
+
+class Logger:
+    """Appends ``{"step": s, **metrics}`` rows to ``<run>/metrics.jsonl`` and ``<run>/metrics.csv``.
+
+    The CSV header grows when new metric names appear (the file is rewritten).
+    ``truncate_after(step)`` drops rows logged after a checkpoint when a run resumes.
+    """
+
+    def __init__(self, run_dir: str | Path, tensorboard: bool = True):
+        self.dir = Path(run_dir)
+        self.dir.mkdir(parents=True, exist_ok=True)
+        self.jsonl = self.dir / "metrics.jsonl"
+        self.csv = self.dir / "metrics.csv"
+        self.rows = []
+        if self.jsonl.exists():
+            self.rows = [json.loads(line) for line in self.jsonl.read_text().splitlines() if line.strip()]
+        self.columns = sorted({k for r in self.rows for k in r} - {"step"})
+        self.tb = _tb_writer(self.dir / "tb") if tensorboard else None
+
+    def truncate_after(self, step: int) -> None:
+        self.rows = [r for r in self.rows if r["step"] <= step]
+        self.jsonl.write_text("".join(json.dumps(r) + "\n" for r in self.rows))
+        self._rewrite_csv()
+
+    def _rewrite_csv(self) -> None:
+        with open(self.csv, "w", newline="") as f:
+            w = csv.DictWriter(f, fieldnames=["step"] + self.columns)
+            w.writeheader()
+            for r in self.rows:
+                w.writerow(r)
+
+    def log(self, step: int, metrics: dict[str, Any]) -> None:
+        row = {"step": int(step)}
+        for k, v in metrics.items():
+            v = float(v)
+            row[k] = v if math.isfinite(v) else str(v)
+        self.rows.append(row)
+        with open(self.jsonl, "a") as f:
+            f.write(json.dumps(row) + "\n")
+        new = sorted(set(row) - {"step"} - set(self.columns))
+        if new:
+            self.columns = sorted(set(self.columns) | set(new))
+            self._rewrite_csv()
+        else:
+            with open(self.csv, "a", newline="") as f:
+                csv.DictWriter(f, fieldnames=["step"] + self.columns).writerow(row)
+        if self.tb is not None:
+            for k, v in row.items():
+                if k != "step" and isinstance(v, float):
+                    self.tb.add_scalar(k, v, step)
+
+    def close(self) -> None:
+        if self.tb is not None:
+            self.tb.close()
