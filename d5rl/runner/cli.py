@@ -1,0 +1,157 @@
+"""``d5rl bench`` and ``d5rl report``: wired into :mod:`d5rl.cli` with :func:`add_bench_parser`
+and :func:`add_report_parser`."""
+
+from __future__ import annotations
+
+import argparse
+import sys
+
+from d5rl.errors import D5RLError
+
+
+def resolve_tasks(names: list[str]) -> list[str]:
+    """Task ids; a family or prefix (``a1``, ``kitchen-standard``) stands for all its registered tasks."""
+    from d5rl.registry import TASK_ID_RE, get_spec, list_tasks
+
+    try:  # the trainer's numpy toy tasks (toy-reach-v0, ...) are not in the registry
+        from d5rl.training.toy import TOY_TASKS
+    except ImportError:
+        TOY_TASKS = ()
+    out: list[str] = []
+    for name in names:
+        for part in name.split(","):
+            part = part.strip()
+            if not part:
+                continue
+            if part in TOY_TASKS:
+                out.append(part)
+            elif TASK_ID_RE.match(part):
+                out.append(get_spec(part).id)  # unknown ids raise with suggestions
+            else:
+                matches = [t for t in list_tasks() if t.startswith(part + "-")]
+                if not matches:
+                    raise D5RLError(f"no registered task is or starts with {part!r}",
+                                    "run `d5rl list` to see the task ids")
+                out += matches
+    return list(dict.fromkeys(out))
+
+
+def _check_algos(algos: list[str], job: str) -> list[str]:
+    from d5rl.runner.grid import DEFAULT_JOB, GridError, canonical_algo
+
+    names = [canonical_algo(a) for part in algos for a in part.split(",") if a.strip()]
+    if job == DEFAULT_JOB:
+        from d5rl.agents import AGENTS
+
+        unknown = [a for a in names if a not in AGENTS]
+        if unknown:
+            raise GridError(f"unknown algorithms {unknown}", f"choose from {', '.join(AGENTS)}")
+    return list(dict.fromkeys(names))
+
+
+def _seeds(values: list[str]) -> list[int]:
+    out = []
+    for v in values:
+        for part in v.split(","):
+            if "-" in part.strip("-") and not part.startswith("-"):
+                lo, hi = part.split("-")
+                out += list(range(int(lo), int(hi) + 1))
+            elif part.strip():
+                out.append(int(part))
+    return list(dict.fromkeys(out))
+
+
+def cmd_bench(args) -> int:
+    from d5rl.registry import resolve
+    from d5rl.runner.bench import run_bench
+    from d5rl.runner.grid import GridError, expand_grid, parse_assignments
+
+    try:  # import the job first: a custom job's module may register its own tasks
+        resolve(args.job)
+    except (ImportError, AttributeError, ValueError) as e:
+        raise GridError(f"cannot import the job {args.job!r} ({e})", "give --job as 'package.module:function'") from e
+    tasks = resolve_tasks(args.tasks)
+    algos = _check_algos(args.algos, args.job)
+    seeds = _seeds(args.seeds)
+    protocol = {}
+    if args.eval_episodes is not None:
+        protocol["eval_episodes"] = args.eval_episodes
+    if args.eval_interval is not None:
+        protocol["eval_interval"] = args.eval_interval
+    cells = expand_grid(tasks, algos, seeds, args.offline_steps, args.online_steps,
+                        overrides=parse_assignments(args.set), job=args.job,
+                        tuned=False if args.no_tuned else args.tuned, protocol_overrides=protocol)
+    if args.dry_run:
+        for c in cells:
+            print(c.key, c.overrides, c.protocol)
+        print(f"{len(cells)} cells")
+        return 0
+    print(f"{len(tasks)} tasks × {len(algos)} algorithms × {len(seeds)} seeds = {len(cells)} cells -> {args.out}",
+          file=sys.stderr)
+    result = run_bench(cells, args.out, workers=args.workers, ray_address=args.ray, max_attempts=args.max_attempts,
+                       progress=not args.no_progress, nice=args.nice, cpus_per_cell=args.cpus_per_cell,
+                       gpus_per_cell=args.gpus_per_cell)
+    print(result.summary(), file=sys.stderr)
+    if not result.failed and not args.no_report:
+        from d5rl.runner.report import ReportError, write_report
+
+        try:
+            path = write_report(args.out)
+            print(f"report: {path}", file=sys.stderr)
+        except ReportError as e:
+            print(f"no report: {e.message}", file=sys.stderr)
+    return 1 if result.failed else 0
+
+
+def cmd_report(args) -> int:
+    from d5rl.runner.report import write_report
+
+    path = write_report(args.run_dir, args.out, reps=args.reps, seed=args.seed, plots=not args.no_plots)
+    print(path.read_text() if args.print else f"wrote {path}")
+    return 0
+
+
+def add_bench_parser(subparsers) -> argparse.ArgumentParser:
+    q = subparsers.add_parser(
+        "bench", help="train a grid of tasks × algorithms × seeds (resumable; local processes or Ray)",
+        description="Run every (task, algorithm, seed) cell of a grid. Finished cells are skipped, so "
+                    "rerunning the same command resumes a killed sweep; a failing cell is retried once.")
+    q.add_argument("--tasks", nargs="+", required=True,
+                   help="task ids, or prefixes standing for all their tasks (a1, kitchen-standard)")
+    q.add_argument("--algos", nargs="+", required=True, help="bc iql cql calql td3bc rlpd ddpm_bc idql")
+    q.add_argument("--seeds", nargs="+", default=["0", "1", "2"], help="seeds (list, or a range like 0-4)")
+    q.add_argument("--offline-steps", type=int, default=500_000, help="offline gradient steps (paper: 500k)")
+    q.add_argument("--online-steps", type=int, default=0,
+                   help="online fine-tuning steps after the offline phase (paper Table 2: 500k)")
+    q.add_argument("--set", action="append", metavar="KEY=VALUE",
+                   help="agent-config override for every cell (beats the tuned file); repeatable")
+    q.add_argument("--eval-episodes", type=int, help="evaluation episodes (default: the task family's protocol)")
+    q.add_argument("--eval-interval", type=int, help="steps between evaluations (default: the family's protocol)")
+    q.add_argument("--tuned", help="tuned-settings JSON (default: d5rl/configs/tuned.json)")
+    q.add_argument("--no-tuned", action="store_true", help="use the agents' defaults, not the tuned file")
+    q.add_argument("--out", required=True, help="run directory (reuse it to resume)")
+    q.add_argument("--workers", type=int, help="local worker processes (default: all cores; 0 = in this process)")
+    q.add_argument("--ray", metavar="ADDRESS", help="run on the Ray cluster at ADDRESS ('auto' = the local one)")
+    q.add_argument("--cpus-per-cell", type=float, default=1.0, help="Ray: CPUs reserved per cell")
+    q.add_argument("--gpus-per-cell", type=float, default=0.0, help="Ray: GPUs reserved per cell (fractions share)")
+    q.add_argument("--max-attempts", type=int, default=2, help="attempts per cell and invocation (default 2)")
+    q.add_argument("--nice", type=int, default=0, help="raise the workers' niceness by this much")
+    q.add_argument("--job", default="d5rl.runner.jobs:train_job",
+                   help="'module:function' run per cell as f(cell, cell_dir) (default: d5rl's trainer)")
+    q.add_argument("--dry-run", action="store_true", help="list the cells and their settings, run nothing")
+    q.add_argument("--no-progress", action="store_true")
+    q.add_argument("--no-report", action="store_true", help="do not write the report after a clean sweep")
+    q.set_defaults(func=cmd_bench)
+    return q
+
+
+def add_report_parser(subparsers) -> argparse.ArgumentParser:
+    q = subparsers.add_parser("report", help="tables (paper layout), IQM with bootstrap CIs and curves of a run")
+    q.add_argument("run_dir", help="the --out directory of `d5rl bench`")
+    q.add_argument("--out", help="where to write (default: RUN_DIR/report)")
+    q.add_argument("--reps", type=int, default=2000, help="bootstrap resamples (default 2000)")
+    q.add_argument("--seed", type=int, default=0, help="seed of the bootstrap")
+    q.add_argument("--no-plots", action="store_true", help="skip the learning-curve PNGs")
+    q.add_argument("--print", action="store_true", help="print report.md")
+    q.set_defaults(func=cmd_report)
+    return q

@@ -1,0 +1,196 @@
+"""Running one cell inside a worker process (local pool or Ray): markers, logs, failures.
+
+:func:`execute_cell` is the only function a backend calls.  It
+
+1. takes an exclusive lock on the cell directory (a second sweep over the same
+   directory skips a cell that is running elsewhere instead of racing it);
+2. returns at once if the cell's ``done`` marker exists;
+3. clears what a previous, unfinished attempt of the job left behind (the runner's
+   own files — ``cell.json``, ``failures.jsonl``, ... — are kept), unless the job
+   declares ``job.resumable = True`` (it continues from its own checkpoint);
+4. sends the job's stdout/stderr (file descriptors, so native code too) to ``log.txt``;
+5. calls ``job(cell, cell_dir)``; on success writes ``done`` atomically (write to
+   a temporary file, fsync, rename), on an exception appends the error and its
+   traceback to ``failures.jsonl`` and ``error.txt``.
+"""
+
+from __future__ import annotations
+
+import contextlib
+import json
+import os
+import shutil
+import socket
+import sys
+import time
+import traceback
+from pathlib import Path
+
+from d5rl.runner.grid import (CELL_FILE, DONE_FILE, ERROR_FILE, FAILURES_FILE, LOCK_FILE, LOG_FILE,
+                              RUNNER_FILES, Cell)
+
+# Environment of a worker: one compute thread per process, so K workers use K cores.
+SINGLE_THREAD_ENV = {
+    "XLA_FLAGS": "--xla_cpu_multi_thread_eigen=false intra_op_parallelism_threads=1",
+    "OMP_NUM_THREADS": "1",
+    "MKL_NUM_THREADS": "1",
+    "OPENBLAS_NUM_THREADS": "1",
+    "TF_CPP_MIN_LOG_LEVEL": "2",
+    "XLA_PYTHON_CLIENT_PREALLOCATE": "false",  # several jobs may share one GPU
+}
+
+
+def configure_worker(single_thread: bool = True, nice: int = 0) -> None:
+    """Set the per-process environment before any numerical library is imported."""
+    if single_thread:
+        for k, v in SINGLE_THREAD_ENV.items():
+            if k == "XLA_FLAGS" and os.environ.get(k):
+                if "xla_cpu_multi_thread_eigen" not in os.environ[k]:
+                    os.environ[k] = os.environ[k] + " " + v
+                continue
+            os.environ.setdefault(k, v)
+    os.environ.setdefault("MUJOCO_GL", "egl")
+    if nice:
+        with contextlib.suppress(OSError):
+            os.nice(nice)
+
+
+def atomic_write_text(path: Path, text: str) -> None:
+    tmp = path.with_name(f".{path.name}.tmp.{os.getpid()}")
+    with open(tmp, "w") as f:
+        f.write(text)
+        f.flush()
+        os.fsync(f.fileno())
+    os.replace(tmp, path)
+
+
+def write_cell_file(cell: Cell, cell_dir: Path) -> None:
+    cell_dir.mkdir(parents=True, exist_ok=True)
+    atomic_write_text(cell_dir / CELL_FILE, json.dumps(cell.to_json(), indent=2, sort_keys=True) + "\n")
+
+
+def read_failures(cell_dir: Path) -> list[dict]:
+    path = Path(cell_dir) / FAILURES_FILE
+    if not path.exists():
+        return []
+    out = []
+    for line in path.read_text().splitlines():
+        if line.strip():
+            with contextlib.suppress(json.JSONDecodeError):
+                out.append(json.loads(line))
+    return out
+
+
+def is_done(cell_dir: Path) -> bool:
+    return (Path(cell_dir) / DONE_FILE).exists()
+
+
+@contextlib.contextmanager
+def _cell_lock(cell_dir: Path):
+    """Exclusive, non-blocking lock; yields False if another process holds it."""
+    import fcntl
+
+    fd = os.open(cell_dir / LOCK_FILE, os.O_RDWR | os.O_CREAT, 0o644)
+    try:
+        try:
+            fcntl.flock(fd, fcntl.LOCK_EX | fcntl.LOCK_NB)
+        except BlockingIOError:
+            yield False
+            return
+        try:
+            yield True
+        finally:
+            fcntl.flock(fd, fcntl.LOCK_UN)
+    finally:
+        os.close(fd)
+
+
+@contextlib.contextmanager
+def _redirect_output(path: Path):
+    """Point fds 1 and 2 (and sys.stdout/err) at ``path`` for the duration."""
+    sys.stdout.flush()
+    sys.stderr.flush()
+    saved = os.dup(1), os.dup(2)
+    fd = os.open(path, os.O_WRONLY | os.O_CREAT | os.O_APPEND, 0o644)
+    try:
+        os.dup2(fd, 1)
+        os.dup2(fd, 2)
+        yield
+    finally:
+        with contextlib.suppress(Exception):
+            sys.stdout.flush()
+            sys.stderr.flush()
+        os.dup2(saved[0], 1)
+        os.dup2(saved[1], 2)
+        for f in (*saved, fd):
+            os.close(f)
+
+
+def clear_job_outputs(cell_dir: Path) -> None:
+    """Delete everything in a cell directory except the runner's own files."""
+    for p in cell_dir.iterdir():
+        if p.name in RUNNER_FILES:
+            continue
+        if p.is_dir() and not p.is_symlink():
+            shutil.rmtree(p)
+        else:
+            p.unlink()
+
+
+def record_failure(cell_dir: Path, attempt: int, error: str, tb: str, wall_s: float | None = None) -> dict:
+    rec = {
+        "attempt": attempt, "error": error, "traceback": tb, "host": socket.gethostname(),
+        "pid": os.getpid(), "time": time.strftime("%Y-%m-%dT%H:%M:%S%z"), "wall_s": wall_s,
+    }
+    with open(cell_dir / FAILURES_FILE, "a") as f:
+        f.write(json.dumps(rec) + "\n")
+    atomic_write_text(cell_dir / ERROR_FILE, f"attempt {attempt}: {error}\n\n{tb}")
+    return rec
+
+
+def execute_cell(cell_json: dict, cell_dir: str, attempt: int = 1, capture_output: bool = True) -> dict:
+    """Run one cell; returns ``{"status": "ok"|"failed"|"skipped"|"busy", ...}``.  Never raises
+    for a failing job (the failure is recorded in the cell directory)."""
+    from d5rl.registry import resolve
+
+    cell = Cell.from_json(cell_json)
+    cdir = Path(cell_dir)
+    cdir.mkdir(parents=True, exist_ok=True)
+    with _cell_lock(cdir) as locked:
+        if not locked:
+            return {"status": "busy", "key": cell.key}
+        if is_done(cdir):
+            return {"status": "skipped", "key": cell.key}
+        try:
+            job = resolve(cell.job)
+        except Exception:  # noqa: BLE001 - an unimportable job is this cell's failure
+            job = None
+        if not getattr(job, "resumable", False):
+            clear_job_outputs(cdir)  # a fresh attempt must not mix with a half-written one
+        start = time.time()
+        redirect = _redirect_output(cdir / LOG_FILE) if capture_output else contextlib.nullcontext()
+        try:
+            with redirect:
+                print(f"=== {cell.key} attempt {attempt} on {socket.gethostname()} pid {os.getpid()} "
+                      f"at {time.strftime('%Y-%m-%d %H:%M:%S')}", flush=True)
+                job = resolve(cell.job)  # again, so an import error lands in the log with its traceback
+                summary = job(cell, cdir)
+        except BaseException as e:  # noqa: BLE001 - KeyboardInterrupt in a job is a failure too
+            wall = time.time() - start
+            err = f"{type(e).__name__}: {e}"
+            rec = record_failure(cdir, attempt, err, traceback.format_exc(), wall)
+            if isinstance(e, KeyboardInterrupt):
+                raise
+            return {"status": "failed", "key": cell.key, "error": err, "traceback": rec["traceback"],
+                    "wall_s": wall}
+        wall = time.time() - start
+        done = {
+            "key": cell.key, "attempt": attempt, "wall_s": wall, "host": socket.gethostname(),
+            "finished": time.strftime("%Y-%m-%dT%H:%M:%S%z"),
+            "summary": summary if isinstance(summary, dict) else None,
+        }
+        atomic_write_text(cdir / DONE_FILE, json.dumps(done, indent=2, default=str) + "\n")
+        return {"status": "ok", "key": cell.key, "wall_s": wall}
+
+
+EXIT_CODES = {"ok": 0, "skipped": 0, "failed": 3, "busy": 4}

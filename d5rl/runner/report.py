@@ -1,0 +1,310 @@
+"""Tables, aggregates and plots computed from a run directory's logs.
+
+``d5rl report RUN_DIR`` writes to ``RUN_DIR/report/``:
+
+* ``scores.csv`` — one row per finished cell: task, algorithm, seed, final
+  offline / online normalized score (the raw data of everything below);
+* ``table1_offline.{md,csv}`` — the layout of the paper's Table 1: rows are
+  (environment, task), columns methods, entries mean ± std over seeds of the final
+  offline score;
+* ``table2_online.{md,csv}`` — Table 2, the same after online fine-tuning
+  (cells run with ``online_steps > 0``);
+* ``aggregate.{md,csv}`` — per method and table: IQM over all tasks and seeds
+  with a 95 % stratified-bootstrap interval (:mod:`d5rl.runner.stats`), and the mean;
+* ``curves/<task>.png`` — learning curves (mean ± std over seeds per method);
+* ``report.md`` — all of it on one page, with links to rollout videos the trainer saved.
+
+``±`` is the standard deviation over seeds with ``ddof=0`` (``numpy.std``).
+"""
+
+from __future__ import annotations
+
+import csv
+import dataclasses
+import io
+import os
+from pathlib import Path
+
+import numpy as np
+
+from d5rl.errors import D5RLError
+from d5rl.runner import stats
+from d5rl.runner.execute import is_done, read_failures
+from d5rl.runner.grid import find_cells
+from d5rl.runner.logs import final_scores, read_evals
+
+# Paper order and display names; algorithms outside this list follow in alphabetical order.
+METHODS = {
+    "bc": "BC", "iql": "IQL", "cql": "CQL", "calql": "CalQL", "td3bc": "TD3+BC", "rlpd": "RLPD",
+    "ddpm_bc": "DDPM+BC", "idql": "IDQL",
+}
+# (task-id prefix, environment label) in the paper's row order.
+ENVIRONMENTS = [
+    ("kitchen-standard", "Standard Kitchen"),
+    ("kitchen-randomized", "Randomized Kitchen"),
+    ("a1", "Locomotion"),
+    ("wx", "WidowX"),
+]
+VIDEO_EXTS = (".mp4", ".gif", ".webm")
+VIDEOS_PER_CELL = 3
+
+
+class ReportError(D5RLError):
+    """Nothing to report (no cells, or no finished cell with evaluations)."""
+
+
+def environment(task: str) -> str:
+    for prefix, label in ENVIRONMENTS:
+        if task == prefix or task.startswith(prefix + "-"):
+            return label
+    return task.split("-")[0]
+
+
+def _env_order(label: str) -> int:
+    labels = [lab for _, lab in ENVIRONMENTS]
+    return labels.index(label) if label in labels else len(labels)
+
+
+def method_name(algo: str) -> str:
+    return METHODS.get(algo, algo)
+
+
+def _method_order(algos) -> list[str]:
+    known = [a for a in METHODS if a in algos]
+    return known + sorted(a for a in algos if a not in METHODS)
+
+
+@dataclasses.dataclass
+class CellResult:
+    task: str
+    algo: str
+    seed: int
+    offline_steps: int
+    online_steps: int
+    directory: Path
+    done: bool
+    evals: list[dict]
+    final: dict[str, float]
+    failures: int
+    videos: list[Path]
+
+
+def collect(run_dir: Path | str) -> list[CellResult]:
+    """Every cell of a run directory with its evaluations (read from the cell's eval log)."""
+    out = []
+    for cell, cdir in find_cells(run_dir):
+        rows = read_evals(cdir, cell.task, cell.offline_steps)
+        final = final_scores(rows)
+        if cell.online_steps <= 0:
+            final.pop("online", None)
+        videos = sorted(p for p in cdir.rglob("*") if p.suffix.lower() in VIDEO_EXTS)
+        out.append(CellResult(cell.task, cell.algo, cell.seed, cell.offline_steps, cell.online_steps, cdir,
+                              is_done(cdir), rows, final, len(read_failures(cdir)), videos))
+    return out
+
+
+def score_table(results: list[CellResult], phase: str) -> dict[tuple[str, str], np.ndarray]:
+    """``{(task, algo): final scores over seeds}`` of finished cells for one phase."""
+    table: dict[tuple[str, str], list[float]] = {}
+    for r in results:
+        if r.done and phase in r.final:
+            table.setdefault((r.task, r.algo), []).append(r.final[phase])
+    return {k: np.asarray(v, np.float64) for k, v in table.items()}
+
+
+def _fmt(x: float, digits: int = 3) -> str:
+    return f"{x:.{digits}f}"
+
+
+def _table_rows(table: dict, algos: list[str]):
+    tasks = sorted({t for t, _ in table}, key=lambda t: (_env_order(environment(t)), environment(t), t))
+    rows = []
+    for task in tasks:
+        entries = {}
+        for a in algos:
+            v = table.get((task, a))
+            entries[a] = None if v is None else (float(v.mean()), float(v.std()), int(v.size))
+        rows.append((environment(task), task, entries))
+    return rows
+
+
+def table_markdown(table: dict, title: str) -> str:
+    algos = _method_order({a for _, a in table})
+    rows = _table_rows(table, algos)
+    lines = [f"### {title}", "", "| Environment | Task | " + " | ".join(method_name(a) for a in algos) + " |",
+             "|---|---|" + "---|" * len(algos)]
+    prev = None
+    for env, task, entries in rows:
+        cells = []
+        for a in algos:
+            e = entries[a]
+            cells.append("-" if e is None else f"{_fmt(e[0])} ± {_fmt(e[1])}" + (f" (n={e[2]})" if e[2] < 2 else ""))
+        lines.append(f"| {env if env != prev else ''} | {task} | " + " | ".join(cells) + " |")
+        prev = env
+    return "\n".join(lines) + "\n"
+
+
+def table_csv(table: dict) -> str:
+    algos = _method_order({a for _, a in table})
+    buf = io.StringIO()
+    w = csv.writer(buf)
+    w.writerow(["environment", "task"] + [f"{a}_{s}" for a in algos for s in ("mean", "std", "n")])
+    for env, task, entries in _table_rows(table, algos):
+        row = [env, task]
+        for a in algos:
+            e = entries[a]
+            row += ["", "", 0] if e is None else [repr(e[0]), repr(e[1]), e[2]]
+        w.writerow(row)
+    return buf.getvalue()
+
+
+def aggregate(table: dict, reps: int = 2000, seed: int = 0) -> list[dict]:
+    """Per method (overall and per environment): IQM with a 95 % stratified-bootstrap CI, and the mean."""
+    out = []
+    algos = _method_order({a for _, a in table})
+    envs = sorted({environment(t) for t, _ in table}, key=lambda e: (_env_order(e), e))
+    for a in algos:
+        groups = [("all", None)] + [(e, e) for e in envs] if len(envs) > 1 else [("all", None)]
+        for label, env in groups:
+            strata = [v for (t, aa), v in sorted(table.items()) if aa == a and (env is None or environment(t) == env)]
+            if not strata:
+                continue
+            rng = np.random.default_rng(seed)
+            point, lo, hi = stats.stratified_bootstrap_ci(strata, stats.iqm, reps=reps, rng=rng)
+            pooled = np.concatenate(strata)
+            out.append({"method": a, "group": label, "tasks": len(strata), "runs": int(pooled.size),
+                        "iqm": point, "iqm_lo": lo, "iqm_hi": hi, "mean": float(pooled.mean())})
+    return out
+
+
+def aggregate_markdown(rows: list[dict], title: str, reps: int) -> str:
+    lines = [f"### {title}", "",
+             f"IQM of normalized scores pooled over tasks and seeds, 95 % stratified-bootstrap CI ({reps} resamples).",
+             "", "| Method | Group | Tasks | Runs | IQM | 95 % CI | Mean |", "|---|---|---|---|---|---|---|"]
+    for r in rows:
+        lines.append(f"| {method_name(r['method'])} | {r['group']} | {r['tasks']} | {r['runs']} | {_fmt(r['iqm'])} "
+                     f"| [{_fmt(r['iqm_lo'])}, {_fmt(r['iqm_hi'])}] | {_fmt(r['mean'])} |")
+    return "\n".join(lines) + "\n"
+
+
+def aggregate_csv(rows: list[dict], table_name: str) -> list[list]:
+    return [[table_name, r["method"], r["group"], r["tasks"], r["runs"], repr(r["iqm"]), repr(r["iqm_lo"]),
+             repr(r["iqm_hi"]), repr(r["mean"])] for r in rows]
+
+
+def plot_curves(results: list[CellResult], out_dir: Path) -> list[Path]:
+    """One PNG per task: normalized score against gradient steps, mean ± std over seeds per method."""
+    try:
+        import matplotlib
+
+        matplotlib.use("Agg")
+        import matplotlib.pyplot as plt
+    except ImportError:
+        return []
+    out_dir.mkdir(parents=True, exist_ok=True)
+    paths = []
+    by_task: dict[str, list[CellResult]] = {}
+    for r in results:
+        if r.evals:
+            by_task.setdefault(r.task, []).append(r)
+    for task, cells in sorted(by_task.items()):
+        fig, ax = plt.subplots(figsize=(6, 4), dpi=100)
+        for a in _method_order({c.algo for c in cells}):
+            # (phase, step) keeps an offline and an online evaluation at the same step apart
+            per_step: dict[int, list[float]] = {}
+            for c in cells:
+                if c.algo != a:
+                    continue
+                for e in c.evals:
+                    per_step.setdefault(e["step"], []).append(e["score"])
+            steps = np.array(sorted(per_step))
+            mean = np.array([np.mean(per_step[s]) for s in steps])
+            std = np.array([np.std(per_step[s]) for s in steps])
+            (line,) = ax.plot(steps, mean, label=method_name(a), marker="." if len(steps) < 30 else None)
+            ax.fill_between(steps, mean - std, mean + std, alpha=0.2, color=line.get_color())
+        offline = {c.offline_steps for c in cells if c.online_steps > 0}
+        for s in offline:
+            ax.axvline(s, color="k", ls="--", lw=0.8)
+        ax.set_title(task)
+        ax.set_xlabel("gradient steps")
+        ax.set_ylabel("normalized score")
+        ax.grid(alpha=0.3)
+        ax.legend(fontsize=8)
+        fig.tight_layout()
+        path = out_dir / f"{task}.png"
+        fig.savefig(path)
+        plt.close(fig)
+        paths.append(path)
+    return paths
+
+
+def write_report(run_dir: Path | str, out_dir: Path | str | None = None, reps: int = 2000, seed: int = 0,
+                 plots: bool = True) -> Path:
+    """Write every report file; returns the path of ``report.md``."""
+    run_dir = Path(run_dir)
+    if not run_dir.is_dir():
+        raise ReportError(f"{run_dir} is not a directory", "pass the --out directory of `d5rl bench`")
+    results = collect(run_dir)
+    if not results:
+        raise ReportError(f"no benchmark cells under {run_dir}", "run `d5rl bench --out RUN_DIR ...` first")
+    out = Path(out_dir) if out_dir else run_dir / "report"
+    out.mkdir(parents=True, exist_ok=True)
+
+    with open(out / "scores.csv", "w", newline="") as f:
+        w = csv.writer(f)
+        w.writerow(["environment", "task", "algo", "seed", "done", "offline_steps", "online_steps",
+                    "offline_score", "online_score", "evaluations", "failed_attempts"])
+        for r in sorted(results, key=lambda r: (r.task, r.algo, r.seed)):
+            w.writerow([environment(r.task), r.task, r.algo, r.seed, int(r.done), r.offline_steps, r.online_steps,
+                        repr(r.final["offline"]) if "offline" in r.final else "",
+                        repr(r.final["online"]) if "online" in r.final else "", len(r.evals), r.failures])
+
+    parts = [f"# Benchmark report: {run_dir.name}", "",
+             f"{sum(r.done for r in results)} of {len(results)} cells finished. Scores are normalized "
+             "(0 = random, 1 = expert reference of the task); each cell's score is its last evaluation "
+             "of the phase. ± is the standard deviation over seeds (ddof=0).", ""]
+    agg_rows = []
+    for phase, name, title in (("offline", "table1_offline", "Table 1: offline"),
+                               ("online", "table2_online", "Table 2: offline-to-online")):
+        table = score_table(results, phase)
+        if not table:
+            continue
+        md = table_markdown(table, title)
+        (out / f"{name}.md").write_text(md)
+        (out / f"{name}.csv").write_text(table_csv(table))
+        agg = aggregate(table, reps=reps, seed=seed)
+        agg_rows += aggregate_csv(agg, name)
+        parts += [md, aggregate_markdown(agg, f"Aggregate ({title.split(': ')[1]})", reps)]
+    if not agg_rows:
+        raise ReportError(f"no finished cell under {run_dir} has evaluations",
+                          "check the cells' log.txt / error.txt, then resume with the same `d5rl bench` command")
+    with open(out / "aggregate.csv", "w", newline="") as f:
+        w = csv.writer(f)
+        w.writerow(["table", "method", "group", "tasks", "runs", "iqm", "iqm_lo", "iqm_hi", "mean"])
+        w.writerows(agg_rows)
+    (out / "aggregate.md").write_text("\n".join(p for p in parts if p.startswith("### Aggregate")))
+
+    if plots:
+        pngs = plot_curves(results, out / "curves")
+        if pngs:
+            parts += ["## Learning curves", ""]
+            parts += [f"![{p.stem}]({os.path.relpath(p, out)})" for p in pngs]
+            parts.append("")
+
+    incomplete = [r for r in results if not r.done]
+    if incomplete:
+        parts += ["## Unfinished cells", "", "| Cell | Failed attempts | Error |", "|---|---|---|"]
+        for r in incomplete:
+            err = r.directory / "error.txt"
+            link = f"[error.txt]({os.path.relpath(err, out)})" if err.exists() else "not run yet / running"
+            parts.append(f"| {r.task}/{r.algo}/seed{r.seed} | {r.failures} | {link} |")
+        parts.append("")
+    videos = [(r, v) for r in results for v in r.videos[:VIDEOS_PER_CELL]]
+    if videos:
+        parts += ["## Rollout videos", ""]
+        for r, v in videos:
+            parts.append(f"- {r.task} / {method_name(r.algo)} / seed {r.seed}: [{v.name}]({os.path.relpath(v, out)})")
+        parts.append("")
+    path = out / "report.md"
+    path.write_text("\n".join(parts))
+    return path
