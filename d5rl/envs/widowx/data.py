@@ -16,8 +16,9 @@ stage index, see :data:`scripted.STAGES`) and ``infos/object`` (which of the
 handled objects it works on).  ``meta`` holds the episode's domain (objects,
 textures, lights, camera), the handling order, the chosen bins, and the
 outcome.  Camera images are *not* stored: :func:`render_states` re-renders any
-view from ``states`` + ``meta`` (:func:`render_episode` gives the 128×128
-``observations/pixels/side`` frames of one stored episode, for a render cache).
+view from ``states`` + ``meta``, and :func:`renders` (the ``DatasetSpec.derived``
+hook) caches the 128×128 ``observations/pixels/side`` frames next to the dataset
+through :mod:`d5rl.datasets.render_cache` when the dataset is loaded.
 """
 
 from __future__ import annotations
@@ -148,4 +149,20 @@ def render_states(states: np.ndarray, meta: dict, size: int = 128, camera: str =
 
 def render_episode(arrays: dict[str, np.ndarray], meta: dict, size: int = 128) -> dict[str, np.ndarray]:
     """The derived arrays of one stored episode: its side-camera frames."""
-    return {"observations/pixels/side": render_states(arrays["states"], meta, size=size)}
+    return {"observations/pixels/side": render_states(arrays["states"], meta, size=int(size))}
+
+
+def renders(spec, root, manifest, *, episodes: int, workers: int | None = None, progress: bool = True,
+            size: int = 128, render: bool = True) -> list:
+    """``DatasetSpec.derived``: the ``observations/pixels/side`` frames, cached next to the dataset.
+
+    ``load_dataset(task, size=64)`` renders another resolution; ``render=False`` loads
+    states and proprioception only.
+    """
+    if not render:
+        return []
+    from d5rl.datasets.render_cache import ensure_render_cache
+
+    return [ensure_render_cache(root, manifest, "d5rl.envs.widowx.data:render_episode", {"size": int(size)},
+                                name=f"side-{int(size)}x{int(size)}", episodes=episodes, workers=workers,
+                                progress=progress)]

@@ -55,6 +55,11 @@ def stats(metas: list[dict]) -> dict:
         out["steps to finish (mean / max)"] = (float(np.mean(done)), int(np.max(done)))
     objs = Counter(o for m in metas for o in (m["domain"]["shoe"], m["domain"]["toy"]))
     out["object draws"] = dict(sorted(objs.items()))
+    handled: dict[str, list[bool]] = {}
+    for m in metas:
+        for o, ok in zip(m["objects"], m["placed_as_intended"]):
+            handled.setdefault(o, []).append(bool(ok))
+    out["pick-and-place success by object"] = {o: (float(np.mean(v)), len(v)) for o, v in sorted(handled.items())}
     return out
 
 
@@ -79,6 +84,8 @@ def to_markdown(task_id: str, s: dict) -> str:
         mean, mx = s["steps to finish (mean / max)"]
         lines.append(f"- steps to finish: mean {mean:.1f}, max {mx}")
     lines.append(f"- object draws: {s['object draws']}")
+    per = ", ".join(f"{o} {r:.1%} (n={n})" for o, (r, n) in s["pick-and-place success by object"].items())
+    lines.append(f"- pick-and-place success (placed in the intended bin) by object: {per}")
     return "\n".join(lines)
 
 

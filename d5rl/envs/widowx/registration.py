@@ -7,6 +7,7 @@ from d5rl.registry import DatasetSpec, ScoreRef, TaskSpec, register
 
 _ENTRY = "d5rl.envs.widowx.task:WidowXSortingEnv"
 _GENERATOR = "d5rl.envs.widowx.data:WidowXScriptedGenerator"
+_RENDERS = "d5rl.envs.widowx.data:renders"  # side-camera frames, rendered from stored states on load
 _SCORE = ScoreRef(
     random=0.0,
     expert=2.0,
@@ -31,6 +32,7 @@ register(
             num_episodes=2000,
             episodes_per_shard=25,
             generator_kwargs={"mode": "sorting", "p_wrong": 0.3},
+            derived=_RENDERS,
             description="2,000 scripted episodes (120 steps) picking and placing both objects in succession; "
             "each goes to the wrong bin with probability 0.3. States + proprio; camera frames are re-rendered.",
         ),
@@ -53,6 +55,7 @@ register(
             num_episodes=2000,
             episodes_per_shard=50,
             generator_kwargs={"mode": "pickplace", "p_wrong": 0.3},
+            derived=_RENDERS,
             description="2,000 scripted episodes (60 steps) picking one of the two objects and placing it "
             "(correct bin with probability 0.7). States + proprio; camera frames are re-rendered.",
         ),
