@@ -3,19 +3,16 @@
 from __future__ import annotations
 
 from d5rl.envs.widowx.task import MAX_EPISODE_STEPS
-from d5rl.registry import DatasetSpec, ScoreRef, TaskSpec, register
+from d5rl.registry import DatasetSpec, TaskSpec, register
 
 _ENTRY = "d5rl.envs.widowx.task:WidowXSortingEnv"
 _GENERATOR = "d5rl.envs.widowx.data:WidowXScriptedGenerator"
 _RENDERS = "d5rl.envs.widowx.data:renders"  # side-camera frames, rendered from stored states on load
-_SCORE = ScoreRef(
-    random=0.0,
-    expert=2.0,
-    source="reward at the last step of an episode: 0 = nothing sorted, 2 = both objects in their bins",
-)
+# The normalized score is not a function of the return (the reward counts sorted objects at
+# every step), so there is no ScoreRef: evaluators read info["score"] at the episode's end.
 _SCORE_DEFINITION = (
     "fraction of the two objects in their correct bin at the end of the episode "
-    "(final-step reward / 2, also info['score']); pass the final-step reward, not the return"
+    "(info['score'] at the episode's end = final-step reward / 2; 1.0 = both sorted)"
 )
 
 register(
@@ -36,7 +33,7 @@ register(
             description="2,000 scripted episodes (120 steps) picking and placing both objects in succession; "
             "each goes to the wrong bin with probability 0.3. States + proprio; camera frames are re-rendered.",
         ),
-        score=_SCORE,
+        score=None,
         score_definition=_SCORE_DEFINITION,
         tags=("pixels", "multi-stage", "scripted"),
     )
@@ -59,7 +56,7 @@ register(
             description="2,000 scripted episodes (60 steps) picking one of the two objects and placing it "
             "(correct bin with probability 0.7). States + proprio; camera frames are re-rendered.",
         ),
-        score=_SCORE,
+        score=None,
         score_definition=_SCORE_DEFINITION,
         tags=("pixels", "multi-stage", "scripted"),
     )

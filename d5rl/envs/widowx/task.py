@@ -151,6 +151,7 @@ class WidowXSortingEnv(MujocoEnv):
         return {
             "num_sorted": count,
             "score": count / 2.0,
+            "success": count == 2,
             "is_success": count == 2,
             "shoe_bin": where[self.domain.shoe],
             "toy_bin": where[self.domain.toy],

