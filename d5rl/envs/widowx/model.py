@@ -86,8 +86,8 @@ SHOES = ("sneaker", "boot", "loafer")
 POOL = SHOES + TOYS
 CATEGORY = {**{s: "shoe" for s in SHOES}, **{t: "toy" for t in TOYS}}
 
-# ContactDB toys: mesh folder, scale, density (kg/m^3; hollow plastic toys), yaw of the
-# narrow horizontal axis handled by the policy from the geometry.
+# ContactDB toys: mesh folder, scale (to fit the 52 mm open gripper across the body's y axis),
+# density (kg/m^3; hollow plastic toys).
 TOY_ASSETS = {
     "duck": dict(folder="duck", scale=0.6, density=500.0),
     "train": dict(folder="train", scale=0.65, density=500.0),

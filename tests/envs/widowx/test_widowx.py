@@ -155,10 +155,8 @@ def test_scripted_sorting_success_band():
 
 def test_wrong_bin_choice_rate():
     gen = WidowXScriptedGenerator(mode="pickplace")
-    rng = np.random.default_rng(0)
     wrong = [gen.episode(i, np.random.default_rng([3, i])).meta["wrong_bin"][0] for i in range(12)]
     assert 0 < sum(wrong) < 12  # both outcomes occur (p = 0.3)
-    del rng
 
 
 # --- contract, determinism, env checker, render -------------------------------------------
