@@ -74,6 +74,7 @@ class Context:
         self.env = env
         self.model, self.data = env.model, env.data
         self.rng = rng
+        self.phase_step = 0  # steps taken in the current phase (set by the policy)
         self._site = env.model.site(km.END_EFFECTOR_SITE).id
 
     def site(self, name: str) -> np.ndarray:
@@ -122,8 +123,11 @@ class Controller:
     # The position servos reach about half the commanded joint velocity within a 0.08 s step
     # (measured: action 0.5 -> 0.50 rad/s on the shoulder, 0.63 rad/s on the wrist).
     TRACKING = 0.5
+    # null-space pull towards the rest posture: shoulder and elbow only, the wrist turns freely
+    POSTURE_GAIN = np.array([0.5, 0.5, 0.5, 0.5, 0.0, 0.0, 0.0])
+    ROT_WEIGHT = 0.4
 
-    def __init__(self, env, max_lin: float = 0.6, max_ang: float = 1.5, gain: float = 4.0, damping: float = 0.05):
+    def __init__(self, env, max_lin: float = 0.7, max_ang: float = 1.8, gain: float = 4.0, damping: float = 0.05):
         self.env = env
         self.model, self.data = env.model, env.data
         self.site = env.model.site(km.END_EFFECTOR_SITE).id
@@ -139,7 +143,8 @@ class Controller:
     def action(self, pos: np.ndarray, rot: np.ndarray, grip: float, speed: float = 1.0) -> np.ndarray:
         d = self.data
         mujoco.mj_jacSite(self.model, d, self._jacp, self._jacr, self.site)
-        jac = np.vstack([self._jacp[:, :7], self._jacr[:, :7]])
+        # orientation rows count less than position rows (rad vs m): reach the point first
+        jac = np.vstack([self._jacp[:, :7], self.ROT_WEIGHT * self._jacr[:, :7]])
         ep = pos - d.site_xpos[self.site]
         er = orientation_error(rot, d.site_xmat[self.site].reshape(3, 3))
         v = self.gain * ep
@@ -149,16 +154,20 @@ class Controller:
             v *= lin_lim / np.linalg.norm(v)
         if np.linalg.norm(w) > ang_lim:
             w *= ang_lim / np.linalg.norm(w)
-        twist = np.concatenate([v, w])
+        twist = np.concatenate([v, self.ROT_WEIGHT * w])
         q = d.qpos[:7]
-        rest = self.posture - q
+        rest = (self.posture - q) * self.POSTURE_GAIN
         free = np.ones(7, dtype=bool)
+        # soft joint-limit avoidance: joints close to a limit take a smaller share of the motion
+        room = np.minimum(q - self.lo, self.hi - q)
+        weight = np.clip(room / 0.3, 0.1, 1.0)
         for _ in range(3):  # drop joints that would be pushed further into their limits, re-solve
-            jf = jac * free
-            jjt = jf @ jf.T + self.damping**2 * np.eye(6)
-            qdot = jf.T @ np.linalg.solve(jjt, twist)
-            null = np.diag(free.astype(float)) - jf.T @ np.linalg.solve(jjt, jf)
-            qdot += null @ (0.5 * rest)
+            w = weight * free
+            jw = jac * w
+            jjt = jw @ jac.T + self.damping**2 * np.eye(6)
+            qdot = w * (jac.T @ np.linalg.solve(jjt, twist))
+            null = np.diag(w) - jw.T @ np.linalg.solve(jjt, jac * w)
+            qdot += null @ rest
             blocked = ((q <= self.lo + self.margin) & (qdot < 0)) | ((q >= self.hi - self.margin) & (qdot > 0))
             if not (blocked & free).any():
                 break
@@ -196,8 +205,8 @@ def _fixed(pos: np.ndarray, rot: np.ndarray):
 
 
 def _grasp_and_swing(ctx: Context, hinge_body: str, handle_site: str, joint: str, goal: float, rot: np.ndarray,
-                     lead: float, depth: float, wrist_follow: float = 0.5, dz: tuple[float, float] = (-0.04, 0.04)
-                     ) -> Iterator[Phase]:
+                     lead: float, depth: float, wrist_follow: float = 0.5, dz: tuple[float, float] = (-0.04, 0.04),
+                     enough: float | None = None) -> Iterator[Phase]:
     """Grasp a handle on a hinged door and swing it along its arc to ``goal`` (joint value)."""
     handle = ctx.site(handle_site) + np.array([0, 0, ctx.rng.uniform(*dz)])
     n = _approach_dir(rot)
@@ -217,7 +226,19 @@ def _grasp_and_swing(ctx: Context, hinge_body: str, handle_site: str, joint: str
         # with part of the door's rotation (less arm reconfiguration, as people do)
         return hinge + rot_z(qt - q0) @ grip_offset, rot_z(wrist_follow * (qt - q0)) @ rot
 
-    yield Phase("swing", swing, grip=CLOSE, done=lambda c: sign * (c.joint(joint) - goal) >= -0.02, max_steps=50)
+    enough = goal if enough is None else enough
+    history: list[float] = []
+
+    def swung(c: Context) -> bool:
+        q = c.joint(joint)
+        history.append(q)
+        if sign * (q - enough) >= 0:
+            return True
+        # stalled (the arm is at the end of its reach) once far enough for the subtask to count
+        stalled = len(history) > 8 and abs(history[-1] - history[-6]) < 0.01
+        return stalled and sign * (q - (enough - sign * 0.12)) >= 0
+
+    yield Phase("swing", swing, grip=CLOSE, done=swung, max_steps=50)
     yield _hold("release", OPEN, 3)
     yield Phase("retreat", lambda c: (c.ee_pos - 0.12 * c.ee_rot[:, 2], c.ee_rot), tol=0.04, rot_tol=9, max_steps=15, freeze=True)
 
@@ -225,12 +246,13 @@ def _grasp_and_swing(ctx: Context, hinge_body: str, handle_site: str, joint: str
 def microwave(ctx: Context) -> Iterator[Phase]:
     yaw = np.arctan2(-ctx.body_mat("microdoorroot")[0, 1], ctx.body_mat("microdoorroot")[1, 1])
     rot = rot_z(yaw) @ R_FORWARD
-    yield from _grasp_and_swing(ctx, "microdoorroot", "microhandle_site", "microwave", -0.66, rot, 0.4, 0.015)
+    yield from _grasp_and_swing(ctx, "microdoorroot", "microhandle_site", "microwave", -0.72, rot, 0.4, 0.015,
+                                enough=-0.62)
 
 
 def hinge_cabinet(ctx: Context) -> Iterator[Phase]:
     yield from _grasp_and_swing(ctx, "hingerightdoor", "hinge_site2", "right_hinge_cabinet", 1.6, R_FORWARD, 0.35,
-                                0.015, dz=(-0.10, -0.03))
+                                0.015, dz=(-0.10, -0.03), enough=1.45)
 
 
 def slide_cabinet(ctx: Context) -> Iterator[Phase]:
@@ -256,17 +278,25 @@ def _knob(ctx: Context, knob_body: str, joint: str, goal: float) -> Iterator[Pha
     # the knob's ridge sticks out 3.6 cm from its plate; the fingertips stop just short of the plate
     plate = ctx.body_pos(knob_body) + np.array([0, -0.021, 0])
     center = plate - np.array([0, FINGERTIP + 0.008, 0])
-    rot = R_FORWARD
+    rot = R_FORWARD  # fingers across the ridge
     n = _approach_dir(rot)
     yield Phase("pre-grasp", _fixed(center - (0.10 + ctx.rng.uniform(0, 0.04)) * n, rot), tol=0.03, rot_tol=0.25)
-    yield Phase("reach", _fixed(center, rot), tol=0.01, max_steps=30, speed=0.8)
+    yield Phase("reach", _fixed(center, rot), tol=0.02, max_steps=20, speed=0.8)
     yield Phase("grasp", _fixed(center, rot), grip=CLOSE, done=_never, max_steps=4)
 
     def turn(c: Context):
         angle = -c.joint(joint)  # the knob turns about -y; the gripper turns about +y
-        return center, rot_y(min(angle + 0.4, -goal + 0.3)) @ rot
+        return center, rot_y(min(angle + 0.8, -goal + 0.5)) @ rot  # the grip slips ~0.3 rad
 
-    yield Phase("turn", turn, grip=CLOSE, done=lambda c: c.joint(joint) <= goal + 0.1, max_steps=40, speed=0.8)
+    history: list[float] = []
+
+    def turned(c: Context) -> bool:
+        q = c.joint(joint)
+        history.append(q)
+        stalled = len(history) > 6 and abs(history[-1] - history[-5]) < 0.01
+        return q <= goal + 0.15 or (stalled and q <= goal + 0.3)
+
+    yield Phase("turn", turn, grip=CLOSE, done=turned, max_steps=30, speed=0.8)
     yield _hold("release", OPEN, 3)
     yield Phase("retreat", lambda c: (c.ee_pos - 0.10 * n, c.ee_rot), tol=0.04, rot_tol=9, max_steps=15, freeze=True)
 
@@ -295,27 +325,46 @@ def light_switch(ctx: Context) -> Iterator[Phase]:
 KETTLE_GOAL_HANDLE = np.array([-0.234, 0.748, 1.879])  # handle site with the kettle at its goal pose
 
 
-KETTLE_GOAL = np.array([-0.23, 0.75, 1.62])  # kettle body position at its goal pose
-KETTLE_HALF = 0.122  # half-width of the kettle's base
+def _glide(start: np.ndarray, goal: np.ndarray, rot: np.ndarray, steps: int):
+    """A target that moves from ``start`` to ``goal`` over ``steps`` steps with a smooth (cosine)
+    speed profile, so carried objects are not jerked."""
+    start, goal = np.asarray(start, float), np.asarray(goal, float)
+
+    def target(ctx: Context):
+        u = min(ctx.phase_step / steps, 1.0)
+        return start + (goal - start) * (0.5 - 0.5 * np.cos(np.pi * u)), rot
+
+    return target
 
 
 def kettle(ctx: Context) -> Iterator[Phase]:
-    """Slide the kettle from the bottom-left to the top-left burner, pushing its base from behind.
+    """Grasp the handle from the front (palm against it), lift, glide to the top-left burner, set
+    it down, let go.  (From above, the knob panel over the top burners is in the way.)"""
+    handle = ctx.site("kettle_site") + np.array([ctx.rng.uniform(-0.015, 0.015), 0, 0])
+    rot = R_FORWARD_FLAT
+    n = _approach_dir(rot)
+    up = np.array([0.0, 0.0, 1.0])
+    grasp = handle + np.array([0, ctx.rng.uniform(0.0, 0.01), 0])
+    yield Phase("pre-grasp", _fixed(grasp - ctx.rng.uniform(0.10, 0.14) * n, rot), tol=0.03, rot_tol=0.2)
+    yield Phase("reach", _fixed(grasp, rot), tol=0.01, max_steps=25, speed=0.8)
+    yield _hold("grasp", CLOSE, 5)
+    lift = ctx.rng.uniform(0.04, 0.06)
+    n_lift = int(ctx.rng.integers(6, 9))
+    yield Phase("lift", _glide(grasp, grasp + lift * up, rot, n_lift), grip=CLOSE, done=_never, max_steps=n_lift + 2)
+    goal = KETTLE_GOAL_HANDLE + np.array([ctx.rng.uniform(-0.01, 0.01), ctx.rng.uniform(-0.005, 0.015), 0.0])
+    n_carry = int(ctx.rng.integers(18, 26))
+    yield Phase("carry", _glide(grasp + lift * up, goal + lift * up, rot, n_carry), grip=CLOSE, done=_never,
+                max_steps=n_carry + 3)
+    yield Phase("lower", _glide(goal + lift * up, goal + 0.005 * up, rot, n_lift), grip=CLOSE, done=_never,
+                max_steps=n_lift + 2)
+    yield _hold("release", OPEN, 6)  # the fingers need ~0.4 s to clear the thick handle
 
-    (A pinch on the round handle lets the kettle swing about the handle; pushing low on the base
-    keeps it upright, like nudging it across the stove.)"""
-    rot = R_DOWN_X  # the hand is thin (+-4.4 cm) across its fingers' axis
-    body = ctx.body_pos("kettleroot")
-    height = 1.62 + ctx.rng.uniform(0.045, 0.06) + FINGERTIP  # fingertips 4.5-6 cm above the stove
-    dx = ctx.rng.uniform(-0.02, 0.02)
-    behind = np.array([body[0] + dx, body[1] - KETTLE_HALF - 0.04, height])
-    yield Phase("pre-push", _fixed(behind + [0, -0.02, 0.18], rot), grip=CLOSE, tol=0.03, rot_tol=0.2)
-    yield Phase("descend", _fixed(behind, rot), grip=CLOSE, tol=0.015, max_steps=25, speed=0.8)
-    goal = KETTLE_GOAL + np.array([ctx.rng.uniform(-0.01, 0.01), ctx.rng.uniform(-0.01, 0.02), 0.0])
-    push_to = np.array([goal[0] + dx, goal[1] - KETTLE_HALF - 0.03, height])
-    yield Phase("push", _fixed(push_to, rot), grip=CLOSE, tol=0.012, max_steps=45, speed=ctx.rng.uniform(0.3, 0.4))
-    yield Phase("retreat", lambda c: (c.ee_pos + np.array([0, -0.06, 0.12]), rot), grip=CLOSE, tol=0.04, rot_tol=9,
-                max_steps=15, freeze=True)
+    def back_off(c: Context):  # straight back until the fingers are clear of the handle
+        p = c.ee_pos
+        p[1] = min(p[1], c.site("kettle_site")[1]) - 0.12
+        return p, rot
+
+    yield Phase("retreat", back_off, tol=0.03, rot_tol=9, max_steps=15, freeze=True)
 
 
 SCRIPTS: dict[str, Callable[[Context], Iterator[Phase]]] = {
@@ -370,6 +419,7 @@ class Demonstrator:
         self._pause = 0
         self.current_subtask: str | None = None
         self.finished = False
+        self.log: list[tuple] = []  # (subtask, phase, steps, final position error) of finished phases
 
     def _phases(self) -> Iterator[Phase]:
         for name in self.subtasks:
@@ -384,6 +434,10 @@ class Demonstrator:
         self.current_subtask = None
 
     def _next_phase(self) -> None:
+        if self._phase is not None:
+            pos, rot = self._frozen if self._frozen is not None else self._phase.target(self.ctx)
+            self.log.append((self.current_subtask, self._phase.name, self._steps,
+                             round(float(np.linalg.norm(pos - self.ctx.ee_pos)), 3)))
         try:
             self._phase = next(self._queue)
         except StopIteration:
@@ -397,6 +451,7 @@ class Demonstrator:
 
     def _phase_over(self) -> bool:
         ph = self._phase
+        self.ctx.phase_step = self._steps
         if self._steps >= ph.max_steps:
             return True
         if ph.done is not None:
@@ -414,6 +469,7 @@ class Demonstrator:
             hold[7:] = OPEN
             return hold
         ph = self._phase
+        self.ctx.phase_step = self._steps
         pos, rot = self._frozen if self._frozen is not None else ph.target(self.ctx)
         self._steps += 1
         if self._pause > 0:
