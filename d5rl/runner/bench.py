@@ -180,7 +180,10 @@ def _start_worker(cell: Cell, cdir: Path, attempt: int, single_thread: bool, nic
     cdir.mkdir(parents=True, exist_ok=True)
     spec = cdir / ".worker.json"
     atomic_write_text(spec, json.dumps(payload))
-    return subprocess.Popen([sys.executable, "-m", "d5rl.runner.worker", str(spec)], stdin=subprocess.DEVNULL)
+    env = dict(os.environ)
+    pkg_root = str(Path(__file__).resolve().parents[2])  # so `-m d5rl.runner.worker` finds this d5rl
+    env["PYTHONPATH"] = os.pathsep.join([pkg_root] + [p for p in env.get("PYTHONPATH", "").split(os.pathsep) if p])
+    return subprocess.Popen([sys.executable, "-m", "d5rl.runner.worker", str(spec)], env=env, stdin=subprocess.DEVNULL)
 
 
 def _run_local(pending: list[Cell], run_dir: Path, result: BenchResult, bar, workers: int, max_attempts: int,

@@ -88,6 +88,14 @@ class CellResult:
     failures: int
     videos: list[Path]
 
+    @property
+    def final_step(self) -> dict[str, int]:
+        """The step of each phase's last evaluation."""
+        out = {}
+        for e in self.evals:
+            out[e["phase"]] = e["step"]
+        return out
+
 
 def collect(run_dir: Path | str) -> list[CellResult]:
     """Every cell of a run directory with its evaluations (read from the cell's eval log)."""
@@ -226,7 +234,7 @@ def plot_curves(results: list[CellResult], out_dir: Path) -> list[Path]:
         for s in offline:
             ax.axvline(s, color="k", ls="--", lw=0.8)
         ax.set_title(task)
-        ax.set_xlabel("gradient steps")
+        ax.set_xlabel("steps (offline updates, then online env steps)")
         ax.set_ylabel("normalized score")
         ax.grid(alpha=0.3)
         ax.legend(fontsize=8)
@@ -253,11 +261,13 @@ def write_report(run_dir: Path | str, out_dir: Path | str | None = None, reps: i
     with open(out / "scores.csv", "w", newline="") as f:
         w = csv.writer(f)
         w.writerow(["environment", "task", "algo", "seed", "done", "offline_steps", "online_steps",
-                    "offline_score", "online_score", "evaluations", "failed_attempts"])
+                    "offline_score", "offline_score_step", "online_score", "online_score_step", "evaluations",
+                    "failed_attempts"])
         for r in sorted(results, key=lambda r: (r.task, r.algo, r.seed)):
             w.writerow([environment(r.task), r.task, r.algo, r.seed, int(r.done), r.offline_steps, r.online_steps,
-                        repr(r.final["offline"]) if "offline" in r.final else "",
-                        repr(r.final["online"]) if "online" in r.final else "", len(r.evals), r.failures])
+                        repr(r.final["offline"]) if "offline" in r.final else "", r.final_step.get("offline", ""),
+                        repr(r.final["online"]) if "online" in r.final else "", r.final_step.get("online", ""),
+                        len(r.evals), r.failures])
 
     parts = [f"# Benchmark report: {run_dir.name}", "",
              f"{sum(r.done for r in results)} of {len(results)} cells finished. Scores are normalized "
@@ -291,6 +301,14 @@ def write_report(run_dir: Path | str, out_dir: Path | str | None = None, reps: i
             parts += [f"![{p.stem}]({os.path.relpath(p, out)})" for p in pngs]
             parts.append("")
 
+    early = [r for r in results if r.done and r.online_steps > 0 and r.final_step.get("offline", r.offline_steps)
+             != r.offline_steps]
+    if early:
+        parts += ["## Caveats", "", "These cells have no evaluation exactly at the end of the offline phase; their "
+                  "Table 1 entry uses their last offline evaluation (step in scores.csv). Choose an evaluation "
+                  "interval that divides --offline-steps to avoid this.", ""]
+        parts += [f"- {r.task}/{r.algo}/seed{r.seed}: offline score from step {r.final_step.get('offline')} "
+                  f"of {r.offline_steps}" for r in early] + [""]
     incomplete = [r for r in results if not r.done]
     if incomplete:
         parts += ["## Unfinished cells", "", "| Cell | Failed attempts | Error |", "|---|---|---|"]
@@ -299,7 +317,7 @@ def write_report(run_dir: Path | str, out_dir: Path | str | None = None, reps: i
             link = f"[error.txt]({os.path.relpath(err, out)})" if err.exists() else "not run yet / running"
             parts.append(f"| {r.task}/{r.algo}/seed{r.seed} | {r.failures} | {link} |")
         parts.append("")
-    videos = [(r, v) for r in results for v in r.videos[:VIDEOS_PER_CELL]]
+    videos = [(r, v) for r in results for v in r.videos[-VIDEOS_PER_CELL:]]  # the latest (final policy) videos
     if videos:
         parts += ["## Rollout videos", ""]
         for r, v in videos:
