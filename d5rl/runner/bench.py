@@ -24,7 +24,7 @@ from typing import Iterable
 from d5rl.errors import D5RLError, MissingDependencyError
 from d5rl.runner.execute import (EXIT_CODES, LOG_FILE, atomic_write_text, clear_job_outputs, configure_worker,
                                  execute_cell, is_done, read_failures, record_failure, write_cell_file)
-from d5rl.runner.grid import Cell, GridError, read_cell
+from d5rl.runner.grid import DEFAULT_JOB, Cell, GridError, read_cell
 
 BENCH_FILE = "bench.json"
 
@@ -84,6 +84,34 @@ def prepare(cells: Iterable[Cell], run_dir: Path | str, argv: list[str] | None =
     return cells
 
 
+def prepare_datasets(cells: Iterable[Cell], workers: int | None = None, progress: bool = True) -> dict[str, str]:
+    """Generate (or finish) each task's dataset once, here, before the cells start.
+
+    Without this every cell of a task would find the dataset missing and generate it at
+    the same time.  Returns ``{task: error}`` for tasks whose data could not be prepared
+    (their cells then fail with the full traceback in their own directory).
+    """
+    from d5rl.errors import UnknownTaskError
+    from d5rl.registry import get_spec
+
+    problems = {}
+    for task in dict.fromkeys(c.task for c in cells if c.job == DEFAULT_JOB):
+        try:
+            spec = get_spec(task)
+        except (UnknownTaskError, D5RLError):
+            continue  # e.g. the trainer's numpy toy tasks: nothing to generate
+        if spec.dataset is None:
+            continue
+        try:
+            from d5rl.datasets.loading import load_dataset
+
+            load_dataset(task, workers=workers, progress=progress, in_memory=False)  # also builds derived caches
+        except Exception as e:  # noqa: BLE001 - reported, and each cell records its own failure
+            problems[task] = f"{type(e).__name__}: {e}"
+            print(f"warning: could not prepare the dataset of {task}: {problems[task]}", file=sys.stderr)
+    return problems
+
+
 def _progress(total: int, initial: int, enabled: bool):
     from tqdm.auto import tqdm
 
@@ -93,13 +121,14 @@ def _progress(total: int, initial: int, enabled: bool):
 def run_bench(cells: Iterable[Cell], run_dir: Path | str, *, workers: int | None = None,
               ray_address: str | None = None, use_ray: bool = False, max_attempts: int = 2,
               progress: bool = True, single_thread: bool = True, nice: int = 0,
-              cpus_per_cell: float = 1.0, gpus_per_cell: float = 0.0,
+              cpus_per_cell: float = 1.0, gpus_per_cell: float = 0.0, prepare_data: bool = True,
               argv: list[str] | None = None) -> BenchResult:
     """Run every unfinished cell; see the module docstring.
 
     ``workers=0`` runs cells one after another in this process (for debugging).
     ``use_ray`` or ``ray_address`` runs them as Ray tasks (on the cluster at
     ``ray_address``, or the Ray instance this process already initialised).
+    ``prepare_data`` generates the tasks' datasets here first (cells of d5rl's trainer only).
     """
     t0 = time.time()
     run_dir = Path(run_dir)
@@ -111,6 +140,8 @@ def run_bench(cells: Iterable[Cell], run_dir: Path | str, *, workers: int | None
             result.skipped.append(cell.key)
         else:
             pending.append(cell)
+    if prepare_data and pending:
+        prepare_datasets(pending, workers=workers or None, progress=progress)
     bar = _progress(len(cells), len(result.skipped), progress)
     try:
         if use_ray or ray_address:
@@ -253,7 +284,10 @@ def _run_ray(pending: list[Cell], run_dir: Path, result: BenchResult, bar, addre
     ray = import_ray()
     if not ray.is_initialized():
         try:
-            ray.init(address=address or "auto", log_to_driver=False)
+            if address == "local":  # start a private Ray instance on this machine
+                ray.init(log_to_driver=False, include_dashboard=False)
+            else:
+                ray.init(address=address or "auto", log_to_driver=False)
         except ConnectionError as e:
             raise D5RLError(f"cannot reach a Ray cluster at {address or 'auto'} ({e})",
                             "start one with `ray start --head` or pass --ray ADDRESS of a running head node") from e

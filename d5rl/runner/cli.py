@@ -76,6 +76,9 @@ def cmd_bench(args) -> int:
     protocol = {}
     if args.eval_episodes is not None:
         protocol["eval_episodes"] = args.eval_episodes
+        protocol["final_eval_episodes"] = args.eval_episodes
+    if args.final_eval_episodes is not None:
+        protocol["final_eval_episodes"] = args.final_eval_episodes
     if args.eval_interval is not None:
         protocol["eval_interval"] = args.eval_interval
     cells = expand_grid(tasks, algos, seeds, args.offline_steps, args.online_steps,
@@ -90,9 +93,9 @@ def cmd_bench(args) -> int:
           file=sys.stderr)
     result = run_bench(cells, args.out, workers=args.workers, ray_address=args.ray, max_attempts=args.max_attempts,
                        progress=not args.no_progress, nice=args.nice, cpus_per_cell=args.cpus_per_cell,
-                       gpus_per_cell=args.gpus_per_cell)
+                       gpus_per_cell=args.gpus_per_cell, prepare_data=not args.no_prepare_data)
     print(result.summary(), file=sys.stderr)
-    if not result.failed and not args.no_report:
+    if not args.no_report:  # also after failures: the report lists the unfinished cells
         from d5rl.runner.report import ReportError, write_report
 
         try:
@@ -126,21 +129,26 @@ def add_bench_parser(subparsers) -> argparse.ArgumentParser:
     q.add_argument("--set", action="append", metavar="KEY=VALUE",
                    help="agent-config override for every cell (beats the tuned file); repeatable")
     q.add_argument("--eval-episodes", type=int, help="evaluation episodes (default: the task family's protocol)")
+    q.add_argument("--final-eval-episodes", type=int,
+                   help="episodes of the evaluation at the end (default: --eval-episodes, else the family's protocol)")
     q.add_argument("--eval-interval", type=int, help="steps between evaluations (default: the family's protocol)")
     q.add_argument("--tuned", help="tuned-settings JSON (default: d5rl/configs/tuned.json)")
     q.add_argument("--no-tuned", action="store_true", help="use the agents' defaults, not the tuned file")
     q.add_argument("--out", required=True, help="run directory (reuse it to resume)")
     q.add_argument("--workers", type=int, help="local worker processes (default: all cores; 0 = in this process)")
-    q.add_argument("--ray", metavar="ADDRESS", help="run on the Ray cluster at ADDRESS ('auto' = the local one)")
+    q.add_argument("--ray", metavar="ADDRESS", help="run on the Ray cluster at ADDRESS ('auto': the one `ray start` runs here; "
+                        "'local': start a private instance)")
     q.add_argument("--cpus-per-cell", type=float, default=1.0, help="Ray: CPUs reserved per cell")
     q.add_argument("--gpus-per-cell", type=float, default=0.0, help="Ray: GPUs reserved per cell (fractions share)")
     q.add_argument("--max-attempts", type=int, default=2, help="attempts per cell and invocation (default 2)")
     q.add_argument("--nice", type=int, default=0, help="raise the workers' niceness by this much")
     q.add_argument("--job", default="d5rl.runner.jobs:train_job",
                    help="'module:function' run per cell as f(cell, cell_dir) (default: d5rl's trainer)")
+    q.add_argument("--no-prepare-data", action="store_true",
+                   help="do not generate missing datasets before the cells start (each cell then loads its own)")
     q.add_argument("--dry-run", action="store_true", help="list the cells and their settings, run nothing")
     q.add_argument("--no-progress", action="store_true")
-    q.add_argument("--no-report", action="store_true", help="do not write the report after a clean sweep")
+    q.add_argument("--no-report", action="store_true", help="do not write RUN_DIR/report after the sweep")
     q.set_defaults(func=cmd_bench)
     return q
 

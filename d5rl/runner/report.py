@@ -21,6 +21,7 @@ from __future__ import annotations
 
 import csv
 import dataclasses
+import importlib.util
 import io
 import os
 from pathlib import Path
@@ -296,6 +297,8 @@ def write_report(run_dir: Path | str, out_dir: Path | str | None = None, reps: i
 
     if plots:
         pngs = plot_curves(results, out / "curves")
+        if not pngs and importlib.util.find_spec("matplotlib") is None:
+            parts += ["## Learning curves", "", "Not drawn: matplotlib is not installed (pip install matplotlib).", ""]
         if pngs:
             parts += ["## Learning curves", ""]
             parts += [f"![{p.stem}]({os.path.relpath(p, out)})" for p in pngs]

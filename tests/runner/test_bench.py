@@ -242,3 +242,18 @@ def test_worker_environment_is_single_threaded(tmp_path):
 def env_job(cell, cell_dir):
     keys = ("OMP_NUM_THREADS", "XLA_FLAGS")
     (Path(cell_dir) / "env.json").write_text(json.dumps({**{k: os.environ.get(k) for k in keys}, "pid": os.getpid()}))
+
+
+def test_datasets_are_generated_once_before_the_cells(tmp_path):
+    from d5rl.datasets.generation import dataset_root
+    from d5rl.runner.bench import prepare_datasets
+    from d5rl.runner.grid import DEFAULT_JOB
+    from tests.datasets.toy import register_toy
+
+    spec = register_toy(name="runnerdata", num_episodes=8, per_shard=4)
+    root = dataset_root(spec.dataset)
+    custom = expand_grid([spec.id], ["bc"], [0], 10, 0, job=toy.JOB, tuned=False)
+    assert prepare_datasets(custom, workers=1, progress=False) == {} and not root.exists()  # custom jobs: untouched
+    cells = expand_grid([spec.id, "toy-reach-v0"], ["bc", "iql"], [0, 1], 10, 0, job=DEFAULT_JOB, tuned=False)
+    assert prepare_datasets(cells, workers=1, progress=False) == {}
+    assert (root / "manifest.json").exists()
