@@ -65,6 +65,7 @@ class Phase:
     max_steps: int = 40
     speed: float = 1.0  # multiplies the controller's speed limits
     freeze: bool = False  # evaluate ``target`` once when the phase starts (relative moves)
+    min_steps: int = 0  # never end before this many steps (e.g. while a glide is under way)
 
 
 class Context:
@@ -325,14 +326,20 @@ def light_switch(ctx: Context) -> Iterator[Phase]:
 KETTLE_GOAL_HANDLE = np.array([-0.234, 0.748, 1.879])  # handle site with the kettle at its goal pose
 
 
-def _glide(start: np.ndarray, goal: np.ndarray, rot: np.ndarray, steps: int):
-    """A target that moves from ``start`` to ``goal`` over ``steps`` steps with a smooth (cosine)
-    speed profile, so carried objects are not jerked."""
-    start, goal = np.asarray(start, float), np.asarray(goal, float)
+def _glide(start: np.ndarray | None, goal: np.ndarray, rot: np.ndarray, steps: int, relative: bool = False):
+    """A target that moves from ``start`` (None: where the hand is when the phase starts) to ``goal``
+    (``relative``: an offset from the start) over ``steps`` steps with a smooth (cosine) speed
+    profile, so carried objects are not jerked."""
+    goal = np.asarray(goal, float)
+    state = {"start": None if start is None else np.asarray(start, float)}
 
     def target(ctx: Context):
+        if state["start"] is None:
+            state["start"] = ctx.ee_pos
+        a = state["start"]
+        b = a + goal if relative else goal
         u = min(ctx.phase_step / steps, 1.0)
-        return start + (goal - start) * (0.5 - 0.5 * np.cos(np.pi * u)), rot
+        return a + (b - a) * (0.5 - 0.5 * np.cos(np.pi * u)), rot
 
     return target
 
@@ -345,17 +352,20 @@ def kettle(ctx: Context) -> Iterator[Phase]:
     n = _approach_dir(rot)
     up = np.array([0.0, 0.0, 1.0])
     grasp = handle + np.array([0, ctx.rng.uniform(0.0, 0.01), 0])
+    offset = grasp - ctx.site("kettle_site")
     yield Phase("pre-grasp", _fixed(grasp - ctx.rng.uniform(0.10, 0.14) * n, rot), tol=0.03, rot_tol=0.2)
-    yield Phase("reach", _fixed(grasp, rot), tol=0.01, max_steps=25, speed=0.8)
+    # follow the handle live: the arm may have nudged the kettle on its way
+    yield Phase("reach", lambda c: (c.site("kettle_site") + offset, rot), tol=0.01, max_steps=25, speed=0.8)
     yield _hold("grasp", CLOSE, 5)
-    lift = ctx.rng.uniform(0.04, 0.06)
+    lift = ctx.rng.uniform(0.07, 0.09)
     n_lift = int(ctx.rng.integers(6, 9))
-    yield Phase("lift", _glide(grasp, grasp + lift * up, rot, n_lift), grip=CLOSE, done=_never, max_steps=n_lift + 2)
+    yield Phase("lift", _glide(None, lift * up, rot, n_lift, relative=True), grip=CLOSE, done=_never,
+                max_steps=n_lift + 2)
     goal = KETTLE_GOAL_HANDLE + np.array([ctx.rng.uniform(-0.01, 0.01), ctx.rng.uniform(-0.005, 0.015), 0.0])
     n_carry = int(ctx.rng.integers(18, 26))
-    yield Phase("carry", _glide(grasp + lift * up, goal + lift * up, rot, n_carry), grip=CLOSE, done=_never,
-                max_steps=n_carry + 3)
-    yield Phase("lower", _glide(goal + lift * up, goal + 0.005 * up, rot, n_lift), grip=CLOSE, done=_never,
+    yield Phase("carry", _glide(None, goal + lift * up, rot, n_carry), grip=CLOSE, tol=0.02, rot_tol=0.3,
+                min_steps=n_carry, max_steps=n_carry + 15)
+    yield Phase("lower", _glide(None, goal + 0.005 * up, rot, n_lift), grip=CLOSE, done=_never,
                 max_steps=n_lift + 2)
     yield _hold("release", OPEN, 6)  # the fingers need ~0.4 s to clear the thick handle
 
@@ -392,7 +402,7 @@ class Style:
     def sample(rng: np.random.Generator) -> "Style":
         return Style(
             speed=float(rng.uniform(0.8, 1.15)),
-            noise=float(rng.uniform(0.02, 0.08)),
+            noise=float(rng.uniform(0.01, 0.05)),
             pause_prob=float(rng.uniform(0.0, 0.25)),
             via_prob=float(rng.uniform(0.0, 0.5)),
         )
@@ -454,6 +464,8 @@ class Demonstrator:
         self.ctx.phase_step = self._steps
         if self._steps >= ph.max_steps:
             return True
+        if self._steps < ph.min_steps:
+            return False
         if ph.done is not None:
             return ph.done(self.ctx)
         pos, rot = self._frozen if self._frozen is not None else ph.target(self.ctx)

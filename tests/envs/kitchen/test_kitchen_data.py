@@ -1,0 +1,102 @@
+"""Standard kitchen data: demonstrator success, generator determinism, dataset round trip,
+relabelling, rendered frames from stored states, and the D4RL importer."""
+
+from __future__ import annotations
+
+import numpy as np
+import pytest
+
+import d5rl
+from d5rl.datasets.loading import load_dataset
+from d5rl.envs.kitchen import data as kdata
+from d5rl.envs.kitchen.data import COMBINATIONS, KitchenStandardGenerator, relabel
+from d5rl.envs.kitchen.subtasks import MIXED, PARTIAL, SUBTASK_NAMES, CompletionChecker
+from d5rl.envs.kitchen.task import KitchenEnv
+
+
+def test_combinations_never_contain_the_partial_task():
+    assert len(COMBINATIONS) == 22 and len(set(COMBINATIONS)) == 22
+    assert all(len(set(c)) == 4 and set(c) <= set(SUBTASK_NAMES) for c in COMBINATIONS)
+    assert all(set(c) != set(PARTIAL) for c in COMBINATIONS)
+    assert tuple(MIXED) in COMBINATIONS
+
+
+def test_generator_is_a_pure_function_of_index_and_rng():
+    gen = KitchenStandardGenerator(max_steps=60)
+    a = gen.episode(5, np.random.default_rng([0, 5]))
+    gen.episode(1, np.random.default_rng([0, 1]))  # another episode in between changes nothing
+    b = KitchenStandardGenerator(max_steps=60).episode(5, np.random.default_rng([0, 5]))
+    c = gen.episode(5, np.random.default_rng([1, 5]))
+    a.validate()
+    assert a.meta == b.meta and a.meta["subtasks"] == list(COMBINATIONS[5])
+    for k in a.arrays:
+        assert a.arrays[k].tobytes() == b.arrays[k].tobytes(), k
+    assert a.arrays["actions"].tobytes() != c.arrays["actions"].tobytes()
+
+
+def test_dataset_round_trip_relabel_and_renders(monkeypatch):
+    ds = load_dataset("kitchen-standard-mixed-v0", episodes=2, workers=1, progress=False, render=False)
+    assert ds.num_episodes == 2 and ds.episode_meta[0]["subtasks"] == list(COMBINATIONS[0])
+    assert ds.arrays["states"].shape[0] == ds.num_transitions + 2
+    # stored completion flags agree with the stored states (qpos follows the time entry)
+    env = KitchenEnv(obs_mode="state")
+    checker = CompletionChecker(env.model)
+    step_done = checker.completed(np.asarray(ds.arrays["states"])[:, 1 : 1 + env.model.nq])
+    next_rows = ds.transition_step + 1
+    np.testing.assert_array_equal(step_done[next_rows], ds.arrays["infos/completed"])
+    np.testing.assert_array_equal(np.asarray(ds.arrays["observations/proprio"]),
+                                  np.asarray(ds.arrays["states"])[:, 1:10].astype(np.float32))
+    # each task counts its own subtasks
+    done = ds.arrays["infos/completed"]
+    for task, tasks in (("kitchen-standard-mixed-v0", MIXED), ("kitchen-standard-partial-v0", PARTIAL)):
+        spec = d5rl.get_spec(task)
+        r = relabel(spec, ds.arrays)["rewards"]
+        cols = [SUBTASK_NAMES.index(t) for t in tasks]
+        np.testing.assert_array_equal(r, done[:, cols].sum(1))
+    partial = load_dataset("kitchen-standard-partial-v0", episodes=2, workers=1, progress=False, render=False)
+    assert not np.array_equal(partial.rewards, ds.rewards)
+    assert partial.rewards.max() <= 3  # never all four partial subtasks in one episode
+    # camera frames come from the stored states; re-rendering never runs the demonstrator
+    import d5rl.envs.kitchen.demonstrator as dm
+
+    monkeypatch.setattr(kdata.KitchenStandardGenerator, "episode", lambda *a: (_ for _ in ()).throw(AssertionError))
+
+    monkeypatch.setattr(dm.Demonstrator, "act", lambda self: (_ for _ in ()).throw(AssertionError("demonstrator ran")))
+    pix = load_dataset("kitchen-standard-mixed-v0", episodes=1, workers=1, progress=False, size=16)
+    frames = pix.arrays["observations/pixels/overview"]
+    assert frames.shape == (pix.num_transitions + 1, 16, 16, 3) and frames.dtype == np.uint8
+    env16 = KitchenEnv(image_size=16)
+    env16.set_state(np.asarray(pix.arrays["states"][7]))
+    np.testing.assert_array_equal(env16.render_cameras()["wrist"], pix.arrays["observations/pixels/wrist"][7])
+    batch = pix.sample(4, np.random.default_rng(0), frame_stack=3)
+    assert batch["observations"]["pixels/overview"].shape == (4, 16, 16, 9)
+
+
+def test_import_d4rl_kitchen_file(tmp_path):
+    h5py = pytest.importorskip("h5py")
+    from d5rl.cli import main
+    from d5rl.envs.kitchen import model as km
+    from d5rl.envs.kitchen.d4rl_import import load_imported
+
+    rng = np.random.default_rng(0)
+    n = 9  # two episodes: rows 0-4 and 5-8
+    qpos = np.tile(km.INIT_QPOS, (n, 1)) + rng.normal(0, 0.01, (n, 30)) * np.r_[np.ones(9), np.zeros(21)]
+    qpos[3:5, 22] = -0.75  # microwave open at the end of episode 0
+    obs = np.concatenate([qpos, np.zeros((n, 30))], axis=1).astype(np.float32)
+    terminals = np.zeros(n, bool)
+    terminals[4] = True
+    path = tmp_path / "kitchen_mixed-v0.hdf5"
+    with h5py.File(path, "w") as f:
+        f["observations"] = obs
+        f["actions"] = rng.uniform(-1, 1, (n, 9)).astype(np.float32)
+        f["rewards"] = np.zeros(n, np.float32)
+        f["terminals"] = terminals
+        f["timeouts"] = np.zeros(n, bool)
+    out = tmp_path / "imported"
+    assert main(["import-d4rl-kitchen", str(path), "--out", str(out), "--size", "16", "--workers", "1"]) == 0
+    ds = load_imported(out, size=16, progress=False)
+    assert ds.num_episodes == 2 and list(ds.episode_lengths) == [4, 3]
+    np.testing.assert_allclose(ds.arrays["observations/proprio"], obs[:, :9])
+    assert ds.arrays["observations/pixels/overview"].shape == (n, 16, 16, 3)
+    np.testing.assert_array_equal(ds.rewards[:4], [0, 0, 1, 1])  # microwave (a mixed subtask) from row 3 on
+    assert main(["import-d4rl-kitchen", str(tmp_path / "missing.hdf5"), "--out", str(out)]) == 2

@@ -1,0 +1,50 @@
+"""Scripted demonstrator: each subtask alone and four-subtask sequences (small samples; the
+full bars run with ``pytest -m slow``)."""
+
+from __future__ import annotations
+
+import numpy as np
+import pytest
+
+from d5rl.envs.kitchen.data import COMBINATIONS
+from d5rl.envs.kitchen.demonstrator import Demonstrator
+from d5rl.envs.kitchen.subtasks import SUBTASK_NAMES
+from d5rl.envs.kitchen.task import KitchenEnv
+
+
+def _success(subtasks, seeds) -> np.ndarray:
+    env = KitchenEnv(obs_mode="state", tasks=tuple(subtasks))
+    solved = []
+    for seed in seeds:
+        rng = np.random.default_rng(seed)
+        env.reset(seed=int(rng.integers(2**31)))
+        policy = Demonstrator(env, subtasks, rng)
+        for _ in range(280):
+            _, _, _, _, info = env.step(policy.act())
+            if policy.finished:
+                break
+        solved.append(info["solved"].copy())
+    return np.array(solved)
+
+
+@pytest.mark.parametrize("name", SUBTASK_NAMES)
+def test_demonstrator_solves_each_subtask(name):
+    # a small sample here (the 90% bar is checked on 30 seeds by the slow test and the data card script)
+    assert _success([name], range(300, 304)).mean() >= 0.75
+
+
+def test_demonstrator_solves_four_subtask_sequences():
+    solved = np.concatenate([_success(list(c), range(400 + 2 * i, 402 + 2 * i)) for i, c in
+                             enumerate([COMBINATIONS[0], COMBINATIONS[21]])])
+    assert solved.all(axis=1).mean() >= 0.5
+    assert solved.mean() >= 0.8
+
+
+@pytest.mark.slow
+def test_demonstrator_bars_full():
+    for name in SUBTASK_NAMES:
+        assert _success([name], range(1000, 1030)).mean() >= 0.9, name
+    solved = np.concatenate([_success(list(c), range(2000 + 10 * i, 2004 + 10 * i)) for i, c in enumerate(COMBINATIONS)])
+    assert solved.all(axis=1).mean() >= 0.8
+
+
