@@ -95,7 +95,8 @@ def prepare_datasets(cells: Iterable[Cell], workers: int | None = None, progress
     from d5rl.registry import get_spec
 
     problems = {}
-    for task in dict.fromkeys(c.task for c in cells if c.job == DEFAULT_JOB):
+    cells = [c for c in cells if c.job == DEFAULT_JOB]
+    for task in dict.fromkeys(c.task for c in cells):
         try:
             spec = get_spec(task)
         except (UnknownTaskError, D5RLError):
@@ -105,7 +106,10 @@ def prepare_datasets(cells: Iterable[Cell], workers: int | None = None, progress
         try:
             from d5rl.datasets.loading import load_dataset
 
-            load_dataset(task, workers=workers, progress=progress, in_memory=False)  # also builds derived caches
+            # cells training on a prefix of the data (--set dataset_episodes=N) need only that prefix
+            sizes = [c.overrides.get("dataset_episodes") for c in cells if c.task == task]
+            episodes = None if any(n is None for n in sizes) else max(int(n) for n in sizes)
+            load_dataset(task, episodes=episodes, workers=workers, progress=progress, in_memory=False)
         except Exception as e:  # noqa: BLE001 - reported, and each cell records its own failure
             problems[task] = f"{type(e).__name__}: {e}"
             print(f"warning: could not prepare the dataset of {task}: {problems[task]}", file=sys.stderr)

@@ -174,7 +174,7 @@ DRIVER = """
 import sys
 from d5rl.runner import expand_grid, run_bench
 from tests.runner import toy
-cells = expand_grid(list(toy.GOALS), ["bc", "iql"], [0, 1], 120, 0, overrides={"sleep": 0.25}, job=toy.JOB,
+cells = expand_grid(list(toy.GOALS), ["bc", "iql"], [0, 1], 120, 0, overrides={"sleep": 0.5}, job=toy.JOB,
                     tuned=False, protocol_overrides={"eval_interval": 40, "eval_episodes": 3})
 run_bench(cells, sys.argv[1], workers=2, progress=False)
 """
@@ -193,10 +193,21 @@ def test_killed_sweep_resumes_without_redoing_finished_cells(tmp_path):
     finally:
         if proc.poll() is None:
             proc.kill()
-    time.sleep(1.0)
+    time.sleep(0.3)
+    orphans = []  # the workers died with the sweep (parent-death signal): none may race the resumed sweep
+    for proc_dir in Path("/proc").glob("[0-9]*"):
+        try:
+            cmdline = (proc_dir / "cmdline").read_bytes().decode(errors="replace")
+        except OSError:
+            continue
+        if "d5rl.runner.worker" in cmdline and str(run_dir) in cmdline:
+            orphans.append(cmdline)
+    if sys.platform.startswith("linux"):
+        assert orphans == []
+    time.sleep(0.5)
     first = done_stamps(run_dir)
     assert 2 <= len(first) < 8
-    cells = expand_grid(TASKS, ALGOS, SEEDS, 120, 0, overrides={"sleep": 0.25}, job=toy.JOB, tuned=False,
+    cells = expand_grid(TASKS, ALGOS, SEEDS, 120, 0, overrides={"sleep": 0.5}, job=toy.JOB, tuned=False,
                         protocol_overrides=PROTOCOL)
     result = run_bench(cells, run_dir, workers=2, progress=False)
     assert not result.failed, result.summary()
@@ -254,6 +265,10 @@ def test_datasets_are_generated_once_before_the_cells(tmp_path):
     root = dataset_root(spec.dataset)
     custom = expand_grid([spec.id], ["bc"], [0], 10, 0, job=toy.JOB, tuned=False)
     assert prepare_datasets(custom, workers=1, progress=False) == {} and not root.exists()  # custom jobs: untouched
-    cells = expand_grid([spec.id, "toy-reach-v0"], ["bc", "iql"], [0, 1], 10, 0, job=DEFAULT_JOB, tuned=False)
+    cells = expand_grid([spec.id, "toy-reach-v0"], ["bc", "iql"], [0, 1], 10, 0, job=DEFAULT_JOB, tuned=False,
+                        overrides={"dataset_episodes": 4})
     assert prepare_datasets(cells, workers=1, progress=False) == {}
-    assert (root / "manifest.json").exists()
+    assert json.loads((root / "manifest.json").read_text())["num_episodes"] == 4  # only the prefix the cells use
+    cells = expand_grid([spec.id], ["bc"], [0], 10, 0, job=DEFAULT_JOB, tuned=False)
+    assert prepare_datasets(cells, workers=1, progress=False) == {}
+    assert json.loads((root / "manifest.json").read_text())["num_episodes"] == 8
