@@ -52,15 +52,22 @@ def shard_plan(num_episodes: int, per_shard: int) -> list[tuple[int, int]]:
 
 
 def _identity(dspec: DatasetSpec, seed: int, generator_version: str) -> dict:
-    """What every shard and the manifest must agree on for data to be reused."""
-    return {
+    """What every shard and the manifest must agree on for data to be reused (as stored in JSON)."""
+    return _json_normal({
         "dataset": dspec.name,
         "dataset_version": dspec.version,
         "generator": dspec.generator,
         "generator_version": generator_version,
         "generator_kwargs": dspec.generator_kwargs,
         "seed": seed,
-    }
+    })
+
+
+def _json_normal(obj):
+    """``obj`` as it reads back from JSON (tuples become lists), so comparisons with disk are exact."""
+    import json
+
+    return json.loads(json.dumps(obj, default=fmt._json_default))
 
 
 # --- worker side -------------------------------------------------------------------------------------

@@ -158,3 +158,9 @@ def test_relabel_replaces_rewards():
     twin = register_toy("relabel-twin", num_episodes=4, relabel="tests.datasets.toy:relabel_double")
     a, b = load_dataset(base, progress=False), load_dataset(twin, progress=False)
     np.testing.assert_array_equal(b.rewards, 2 * a.rewards)
+
+
+def test_tuple_generator_kwargs_survive_the_json_round_trip():
+    spec = register_toy("tuplekw", num_episodes=4, per_shard=4, extra=("a", "b"))
+    generate(spec, progress=False)
+    assert load_dataset(spec, generate=False).num_episodes == 4  # tuple vs list must not look stale

@@ -25,7 +25,7 @@ class ToyEnv(gym.Env):
 class ToyGenerator:
     version = "1"
 
-    def __init__(self, task_id, delay=0.0, pixels=False):
+    def __init__(self, task_id, delay=0.0, pixels=False, extra=()):
         self.delay = delay
         self.pixels = pixels
 
