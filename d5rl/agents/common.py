@@ -52,7 +52,10 @@ def to_batched(observations, ndims: tuple):
 
 def make_train_state(module: nn.Module, key, inputs: tuple, lr: float | optax.Schedule, **init_kwargs) -> TrainState:
     params = module.init(key, *inputs, **init_kwargs)["params"]
-    return TrainState.create(apply_fn=module.apply, params=params, tx=optax.adam(lr))
+    state = TrainState.create(apply_fn=module.apply, params=params, tx=optax.adam(lr))
+    # Strongly typed leaves everywhere: an agent must have the same avals before and after
+    # an update, or every jitted function compiles twice.
+    return state.replace(step=jnp.zeros((), jnp.int32))
 
 
 def check_batch(batch: dict, required=("observations", "actions", "rewards", "masks", "next_observations")):

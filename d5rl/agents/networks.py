@@ -279,7 +279,7 @@ class Temperature(nn.Module):
 
     @nn.compact
     def __call__(self):
-        log_t = self.param("log_temp", lambda _: jnp.full((), jnp.log(self.initial_value)))
+        log_t = self.param("log_temp", lambda _: jnp.full((), math.log(self.initial_value), jnp.float32))
         return jnp.exp(log_t)
 
 

@@ -42,7 +42,7 @@ def evaluate(
     fns = [env_fn or env_factory(task_id, frame_stack, "rgb_array" if (render and i == 0) else None)
            for i in range(num_envs)]
     envs = [fn() for fn in fns] if not processes else None
-    vec = gym.vector.AsyncVectorEnv(fns, copy=True) if processes else None
+    vec = gym.vector.AsyncVectorEnv(fns, copy=True, context="spawn") if processes else None
     returns, lengths, successes, frames = [], [], [], []
     key = jax.random.PRNGKey(seed)
     ep = 0

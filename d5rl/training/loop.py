@@ -385,3 +385,23 @@ def train(
     finally:
         bar.close()
         logger.close()
+
+
+def load_run(run_dir: str | Path):
+    """``(agent, resolved_config)`` from a run directory's config and latest checkpoint."""
+    run_dir = Path(run_dir)
+    config_path = run_dir / "config.json"
+    if not config_path.exists():
+        raise RunDirError(f"{run_dir} has no config.json", "pass the directory a `d5rl train` run wrote")
+    resolved = json.loads(config_path.read_text())
+    ckpt = load_checkpoint(run_dir)
+    if ckpt is None:
+        raise RunDirError(f"{run_dir} has no checkpoint yet", "wait for the first checkpoint or train longer")
+    agent_cls, agent_config_fn = get_agent(resolved["algo"])
+    cfg = Config(resolved["agent"])
+    env = make_task_env(resolved["task_id"], resolved["train"]["frame_stack"])
+    obs, _ = env.reset(seed=0)
+    action = np.zeros(env.action_space.shape, np.float32)
+    env.close()
+    agent = agent_cls.create(resolved["seed"], obs, action, cfg)
+    return agent.from_bytes(ckpt[0]["agent"]), resolved
