@@ -1,0 +1,85 @@
+"""Reference returns for the A1 normalized scores, written to ``scores.json``.
+
+    d5rl calibrate a1-walk-v0 [--episodes 20]
+
+``random`` is the mean return of uniform random actions; ``expert`` is the mean
+return of the best data-collecting agent's final policy (deterministic actions)
+on the task itself.  A normalized score of 1 therefore means "as good as the best
+policy that produced the data", 0 "as good as random actions".
+"""
+
+from __future__ import annotations
+
+import json
+from pathlib import Path
+
+import numpy as np
+
+from d5rl.envs.a1.experts import POLICY_DIR
+from d5rl.envs.a1.policy import SnapshotPolicy
+from d5rl.registry import get_spec, make_env
+
+SCORES_FILE = Path(__file__).with_name("scores.json")
+CANDIDATES = {"a1-walk-v0": ("speed-0.5", "speed-0.8", "speed-1.0"),
+              "a1-run-v0": ("speed-0.5", "speed-0.8", "speed-1.0"),
+              "a1-hiking-v0": ("heading",)}
+
+
+def evaluate(task_id: str, policy: SnapshotPolicy, episodes: int, seed: int, deterministic: bool = True) -> np.ndarray:
+    env = make_env(task_id)
+    rng = np.random.default_rng(seed)
+    returns = []
+    for i in range(episodes):
+        obs, _ = env.reset(seed=seed * 100_003 + i)
+        total, done = 0.0, False
+        while not done:
+            obs, r, term, trunc, _ = env.step(policy(obs, rng, deterministic=deterministic))
+            total += r
+            done = term or trunc
+        returns.append(total)
+    env.close()
+    return np.asarray(returns)
+
+
+def calibrate(task_id: str, episodes: int = 20, seed: int = 0) -> dict:
+    get_spec(task_id)
+    random_returns = evaluate(task_id, SnapshotPolicy(None), episodes, seed, deterministic=False)
+    best_agent, best = None, -np.inf
+    per_agent = {}
+    for agent in CANDIDATES[task_id]:
+        ret = evaluate(task_id, SnapshotPolicy(POLICY_DIR / agent / "final.npz"), episodes, seed)
+        per_agent[agent] = round(float(ret.mean()), 3)
+        if ret.mean() > best:
+            best_agent, best = agent, float(ret.mean())
+    return {
+        "random": round(float(random_returns.mean()), 3),
+        "expert": round(best, 3),
+        "expert_agent": best_agent,
+        "per_agent": per_agent,
+        "source": f"d5rl calibrate {task_id} --episodes {episodes} --seed {seed}: mean return of uniform random "
+                  f"actions / of agent '{best_agent}' (final policy, deterministic)",
+    }
+
+
+def write_scores(task_id: str, result: dict, path: Path = SCORES_FILE) -> None:
+    table = json.loads(path.read_text()) if path.exists() else {}
+    table[task_id] = result
+    path.write_text(json.dumps(table, indent=1, sort_keys=True) + "\n")
+
+
+def add_calibrate_parser(subparsers) -> None:
+    q = subparsers.add_parser("calibrate", help="measure an A1 task's random and expert reference returns")
+    q.add_argument("task", choices=sorted(CANDIDATES))
+    q.add_argument("--episodes", type=int, default=20)
+    q.add_argument("--seed", type=int, default=0)
+    q.add_argument("--dry-run", action="store_true", help="print, do not write scores.json")
+
+    def run(args) -> int:
+        result = calibrate(args.task, args.episodes, args.seed)
+        print(json.dumps(result, indent=1))
+        if not args.dry_run:
+            write_scores(args.task, result)
+            print(f"wrote {SCORES_FILE}")
+        return 0
+
+    q.set_defaults(func=run)

@@ -1,0 +1,134 @@
+"""A1 datasets: the data-collecting agents' replay buffers, regenerated from policy snapshots.
+
+The paper's A1 data are the replay buffers of RL agents, "from first exploration to
+expert".  Training those agents (``d5rl.envs.a1.experts``) takes hours, so the
+repository ships what training produced: for each agent, its actor at every
+snapshot and how many episodes each snapshot collected (``policies/<agent>/log.json``).
+Episode ``i`` of the dataset is the ``i``-th training episode in that chronology,
+re-collected by the snapshot that was acting then (uniform random actions before
+learning started), with the SAC policy's own sampling noise.  Per-step reward terms
+are stored in ``infos/*`` so each task relabels rewards for its own target.
+"""
+
+from __future__ import annotations
+
+import functools
+import json
+from pathlib import Path
+
+import numpy as np
+
+from d5rl.datasets.episode import Episode
+from d5rl.envs.a1 import rewards
+from d5rl.envs.a1.experts import AGENTS, EPISODE_STEPS, POLICY_DIR
+from d5rl.envs.a1.policy import SnapshotPolicy
+from d5rl.errors import D5RLError
+
+INFO_KEYS = ("forward_speed", "standing", "energy", "heading_error")
+
+
+@functools.lru_cache(maxsize=None)
+def agent_log(agent: str, policy_dir: str = str(POLICY_DIR)) -> dict:
+    path = Path(policy_dir) / agent / "log.json"
+    if not path.exists():
+        raise D5RLError(
+            f"the A1 data-collecting agent {agent!r} has no policy snapshots ({path} is missing)",
+            f"train it: `python -m d5rl.envs.a1.experts --agent {agent}` (needs the `train` extra)",
+        )
+    return json.loads(path.read_text())
+
+
+def episode_table(agents: tuple[str, ...]) -> list[tuple[str, int]]:
+    """(agent, segment) of every dataset episode, agent by agent, in training order."""
+    table = []
+    for agent in agents:
+        for seg_i, seg in enumerate(agent_log(agent)["segments"]):
+            table += [(agent, seg_i)] * int(seg["episodes"])
+    return table
+
+
+def num_episodes(agents: tuple[str, ...]) -> int:
+    try:
+        return len(episode_table(agents))
+    except D5RLError:
+        return 0
+
+
+class ReplayBufferGenerator:
+    """Episode ``i`` = the ``i``-th training episode of the agents, in chronological order."""
+
+    version = "1"
+
+    def __init__(self, task_id: str, agents: tuple[str, ...]):
+        self.agents = tuple(agents)
+        self.table = episode_table(self.agents)
+        self._envs: dict = {}
+        self._policies: dict = {}
+
+    def _env(self, agent):
+        if agent not in self._envs:
+            from d5rl.envs.a1.task import A1Env
+
+            speed, command = AGENTS[agent]
+            self._envs[agent] = A1Env(target_speed=speed, command=command)
+        return self._envs[agent]
+
+    def _policy(self, agent, seg_i):
+        key = (agent, seg_i)
+        if key not in self._policies:
+            snap = agent_log(agent)["segments"][seg_i]["snapshot"]
+            self._policies[key] = SnapshotPolicy(None if snap is None else POLICY_DIR / agent / snap)
+        return self._policies[key]
+
+    def episode(self, index: int, rng: np.random.Generator) -> Episode:
+        if index >= len(self.table):
+            raise D5RLError(f"episode {index} is beyond the {len(self.table)} episodes of the A1 agents' buffers")
+        agent, seg_i = self.table[index]
+        env, policy = self._env(agent), self._policy(agent, seg_i)
+        obs, _ = env.reset(seed=int(rng.integers(2**31)))
+        observations, states = [obs], [env.get_state()]
+        actions, rews, terms = [], [], []
+        infos = {k: [] for k in INFO_KEYS}
+        for _ in range(EPISODE_STEPS):
+            action = policy(obs, rng)
+            obs, r, terminated, _, info = env.step(action)
+            observations.append(obs)
+            states.append(env.get_state())
+            actions.append(action)
+            rews.append(r)
+            terms.append(terminated)
+            for k in INFO_KEYS:
+                infos[k].append(info[k])
+            if terminated:
+                break
+        t = len(actions)
+        timeouts = np.zeros(t, bool)
+        timeouts[-1] = not terms[-1]
+        arrays = {
+            "observations": np.asarray(observations, np.float32),
+            "states": np.asarray(states, np.float64),
+            "actions": np.asarray(actions, np.float32),
+            "rewards": np.asarray(rews, np.float32),
+            "terminals": np.asarray(terms, bool),
+            "timeouts": timeouts,
+            **{f"infos/{k}": np.asarray(v, np.float32) for k, v in infos.items()},
+        }
+        seg = agent_log(agent)["segments"][seg_i]
+        meta = {"agent": agent, "agent_target_speed": AGENTS[agent][0], "segment": seg_i,
+                "snapshot": seg["snapshot"] or "random", "training_step": seg["start_step"]}
+        return Episode(arrays, meta)
+
+
+def relabel_speed(spec, arrays) -> dict:
+    """Rewards of a speed-tracking task (``env_kwargs['target_speed']``) from stored reward terms."""
+    target = spec.env_kwargs["target_speed"]
+    r = rewards.speed_reward(np.asarray(arrays["infos/forward_speed"]), np.asarray(arrays["infos/standing"]),
+                             np.asarray(arrays["infos/energy"]), target)
+    return {"rewards": r.astype(np.float32)}
+
+
+def relabel_hiking(spec, arrays) -> dict:
+    target = spec.env_kwargs["target_speed"]
+    r = rewards.hiking_reward(np.asarray(arrays["infos/forward_speed"]), np.asarray(arrays["infos/standing"]),
+                              np.asarray(arrays["infos/energy"]), np.asarray(arrays["infos/heading_error"]), target)
+    return {"rewards": r.astype(np.float32)}

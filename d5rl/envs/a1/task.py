@@ -1,0 +1,190 @@
+"""Unitree A1 locomotion tasks."""
+
+from __future__ import annotations
+
+import gymnasium as gym
+import mujoco
+import numpy as np
+
+from d5rl.envs.a1 import rewards
+from d5rl.envs.a1.model import ACTION_SCALE, CONTROL_DT, NOMINAL_POSE, PHYSICS_DT, Course, Indices, build_model
+from d5rl.envs.base import MujocoEnv
+
+MAX_TILT = np.deg2rad(60.0)
+MAX_LATERAL_OFFSET = 3.0  # m, hiking
+WAYPOINT_TOLERANCE = 0.1  # m, hiking: a waypoint counts once the robot is this close to its x
+
+
+def _euler_from_quat(q):
+    w, x, y, z = q
+    roll = np.arctan2(2 * (w * x + y * z), 1 - 2 * (x * x + y * y))
+    pitch = np.arcsin(np.clip(2 * (w * y - z * x), -1.0, 1.0))
+    yaw = np.arctan2(2 * (w * z + x * y), 1 - 2 * (y * y + z * z))
+    return roll, pitch, yaw
+
+
+def _wrap(a):
+    return (a + np.pi) % (2 * np.pi) - np.pi
+
+
+class A1Env(MujocoEnv):
+    """Unitree A1 quadruped tracking a forward speed, on flat ground or on a hiking course.
+
+    **Description.** The MuJoCo Menagerie A1 under 20 Hz PD position control (kp 60, kd 6,
+    torques clipped to ±33.5 N·m, 1 ms physics). ``a1-walk-v0`` tracks 0.75 m/s and
+    ``a1-run-v0`` 1.25 m/s on flat ground; ``a1-hiking-v0`` walks at 0.75 m/s along a
+    generated course of rolling bumps and ramps through waypoints at x = -10, 0, 20, 40.
+
+    **Action space.** ``Box(-1, 1, (12,))``: joint targets = nominal pose [0, 0.9, -1.8] per
+    leg (FR, FL, RR, RL; hip, thigh, calf) + action × [0.2, 0.4, 0.4].
+
+    **Observation space.** ``Box(-inf, inf, (58,))`` float32: joint positions (12), joint
+    velocities (12), joint torques (12), body gyro (3), body-frame linear velocity (3), body
+    quaternion wxyz (4), previous action (12).  With ``command="heading"`` or
+    ``"waypoints"`` two more entries: sin and cos of the heading error (60 in all).
+
+    **Reward.** ``10 · tolerance(v_fwd·cos(roll)·cos(pitch), target ± 0.1, margin target) ·
+    standing − c · Σ|q̇ · τ|`` with ``standing`` = upright tolerance × mean joint tolerance
+    around the nominal pose and c = 0.01 (hiking: the speed term is multiplied by
+    ``tolerance(heading error, ±π/12, margin π)`` and c = 0.001).  Per-step terms are in
+    ``info`` (``forward_speed``, ``standing``, ``energy``, ``heading_error``).
+
+    **Start state.** The ``home`` keyframe with joint noise U(±0.05 rad) and yaw noise
+    U(±0.1 rad) (hiking: at x = -20 facing the course).
+
+    **Episode end.** Terminates when |roll| or |pitch| > 60° (hiking also when the lateral
+    offset exceeds 3 m); truncated after 400 steps (hiking 1000) by the TimeLimit wrapper.
+
+    **Version history.** v0: initial release.
+    """
+
+    metadata = {"render_modes": ["rgb_array"], "render_fps": 20}
+
+    def __init__(
+        self,
+        target_speed: float = 0.75,
+        terrain: str = "flat",
+        command: str = "forward",
+        course_seed: int = 0,
+        heading_change_steps: int = 100,
+        render_mode: str | None = None,
+        render_size: tuple[int, int] = (240, 320),
+    ):
+        if terrain not in ("flat", "course"):
+            raise ValueError(f"terrain must be 'flat' or 'course', got {terrain!r}")
+        if command not in ("forward", "heading", "waypoints"):
+            raise ValueError(f"command must be 'forward', 'heading' or 'waypoints', got {command!r}")
+        if command == "waypoints" and terrain != "course":
+            raise ValueError("command='waypoints' needs terrain='course'")
+        self.course = Course(seed=course_seed) if terrain == "course" else None
+        super().__init__(build_model(self.course), frame_skip=round(CONTROL_DT / PHYSICS_DT),
+                         render_mode=render_mode, render_size=render_size, render_camera="track")
+        self.target_speed = float(target_speed)
+        self.command = command
+        self.heading_change_steps = int(heading_change_steps)
+        self.energy_coef = rewards.ENERGY_COEF if command == "forward" else rewards.HIKING_ENERGY_COEF
+        self.idx = Indices.of(self.model)
+        self._home = self.model.key("home")
+        obs_dim = 58 + (2 if command != "forward" else 0)
+        self.observation_space = gym.spaces.Box(-np.inf, np.inf, (obs_dim,), np.float32)
+        self.action_space = gym.spaces.Box(-1.0, 1.0, (12,), np.float32)
+        self._prev_action = np.zeros(12)
+        self._heading = 0.0
+        self._waypoint = 0
+        self._t = 0
+
+    # --- state accessors -----------------------------------------------------------------------
+    def joint_pos(self):
+        return self.data.qpos[self.idx.qpos_joints]
+
+    def joint_vel(self):
+        return self.data.qvel[self.idx.qvel_joints]
+
+    def torques(self):
+        return self.data.actuator_force.copy()
+
+    def body_quat(self):
+        return self.data.qpos[3:7]
+
+    def local_velocity(self):
+        return self.data.sensordata[self.idx.velocimeter]
+
+    def upright(self) -> float:
+        """z component of the body's up axis in the world frame (1 = level)."""
+        return float(self.data.xmat[1][8])
+
+    # --- task -------------------------------------------------------------------------------------
+    def _desired_heading(self) -> float:
+        if self.command == "forward":
+            return 0.0
+        if self.command == "heading":
+            return self._heading
+        wx = self.course.waypoints[min(self._waypoint, len(self.course.waypoints) - 1)]
+        x, y = self.data.qpos[0], self.data.qpos[1]
+        return float(np.arctan2(-y, wx - x))
+
+    def _heading_error(self) -> float:
+        _, _, yaw = _euler_from_quat(self.body_quat())
+        return float(_wrap(self._desired_heading() - yaw))
+
+    def _obs(self) -> np.ndarray:
+        parts = [self.joint_pos(), self.joint_vel(), self.torques(), self.data.sensordata[self.idx.gyro],
+                 self.local_velocity(), self.body_quat(), self._prev_action]
+        if self.command != "forward":
+            err = self._heading_error()
+            parts.append([np.sin(err), np.cos(err)])
+        return np.concatenate(parts).astype(np.float32)
+
+    def reset(self, *, seed: int | None = None, options: dict | None = None):
+        super().reset(seed=seed)
+        rng = self.np_random
+        mujoco.mj_resetDataKeyframe(self.model, self.data, self._home.id)
+        self.data.qpos[self.idx.qpos_joints] += rng.uniform(-0.05, 0.05, 12)
+        yaw = rng.uniform(-0.1, 0.1)
+        if self.course is not None:
+            self.data.qpos[0] = self.course.start_x
+            self.data.qpos[2] += self.course.height_at(self.course.start_x)
+        self.data.qpos[3:7] = [np.cos(yaw / 2), 0.0, 0.0, np.sin(yaw / 2)]
+        self.data.ctrl[:] = NOMINAL_POSE
+        self._prev_action = np.zeros(12)
+        self._heading = rng.uniform(-np.pi, np.pi) if self.command == "heading" else 0.0
+        self._waypoint = 0
+        self._t = 0
+        mujoco.mj_forward(self.model, self.data)
+        return self._obs(), {}
+
+    def reward_terms(self) -> tuple[float, dict]:
+        """The reward of the current state and its terms (also stored in datasets for relabelling)."""
+        roll, pitch, _ = _euler_from_quat(self.body_quat())
+        forward = float(self.local_velocity()[0] * np.cos(roll) * np.cos(pitch))
+        standing = float(rewards.standing_term(self.upright(), self.joint_pos()))
+        energy = float(np.abs(self.joint_vel() * self.torques()).sum())
+        heading_error = self._heading_error()
+        if self.command == "forward":
+            reward = rewards.speed_reward(forward, standing, energy, self.target_speed, self.energy_coef)
+        else:
+            reward = rewards.hiking_reward(forward, standing, energy, heading_error, self.target_speed)
+        return float(reward), {"forward_speed": forward, "standing": standing, "energy": energy,
+                               "heading_error": heading_error}
+
+    def step(self, action):
+        action = np.clip(np.asarray(action, dtype=np.float64), -1.0, 1.0)
+        if action.shape != (12,):
+            raise ValueError(f"action must have shape (12,), got {action.shape}")
+        self.do_simulation(NOMINAL_POSE + ACTION_SCALE * action)
+        self._prev_action = action
+        self._t += 1
+        if self.command == "heading" and self._t % self.heading_change_steps == 0:
+            self._heading = float(_wrap(self._heading + self.np_random.uniform(-np.pi / 2, np.pi / 2)))
+        if self.command == "waypoints":
+            while (self._waypoint < len(self.course.waypoints)
+                   and self.data.qpos[0] >= self.course.waypoints[self._waypoint] - WAYPOINT_TOLERANCE):
+                self._waypoint += 1
+
+        reward, terms = self.reward_terms()
+        roll, pitch, _ = _euler_from_quat(self.body_quat())
+        terminated = bool(abs(roll) > MAX_TILT or abs(pitch) > MAX_TILT)
+        if self.course is not None and abs(self.data.qpos[1]) > MAX_LATERAL_OFFSET:
+            terminated = True
+        info = {**terms, "x": float(self.data.qpos[0]), "waypoints_reached": self._waypoint}
+        return self._obs(), float(reward), terminated, False, info
