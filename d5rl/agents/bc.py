@@ -52,11 +52,11 @@ class BCAgent(Agent):
 
 def get_config() -> Config:
     return Config(
-        agent_name="bc",
+        agent_name="bc",  # name in d5rl.agents.AGENTS
         actor_lr=3e-4,  # Adam learning rate (state tasks; D5RL uses 1e-4 for pixel policies)
         hidden_dims=(256, 256),  # MLP widths of the policy
         log_std_min=-5.0,  # clip of the policy's log-std
-        log_std_max=2.0,
+        log_std_max=2.0,  # upper clip of the policy's log-std
         state_dependent_std=True,  # log-std from the network (False = one learned vector)
         batch_size=256,  # minibatch size (256 state, 64 pixels in D5RL)
         **ENCODER_DEFAULTS,

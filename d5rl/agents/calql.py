@@ -31,7 +31,7 @@ class CalQLAgent(CQLAgent):
 def get_config() -> Config:
     c = cql_config().to_dict()
     c.update(
-        agent_name="calql",
+        agent_name="calql",  # name in d5rl.agents.AGENTS
         cql_alpha=5.0,  # α (Cal-QL kitchen: 5; D5RL sweeps 0.1, 1, 5, 10)
     )
     return Config(c)

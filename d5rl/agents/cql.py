@@ -131,7 +131,7 @@ class CQLAgent(Agent):
 
 def get_config() -> Config:
     return Config(
-        agent_name="cql",
+        agent_name="cql",  # name in d5rl.agents.AGENTS
         actor_lr=1e-4,  # policy Adam lr (CQL paper and D5RL)
         critic_lr=3e-4,  # Q Adam lr (CQL paper and D5RL)
         temp_lr=3e-4,  # SAC temperature Adam lr
@@ -145,13 +145,13 @@ def get_config() -> Config:
         cql_temp=1.0,  # temperature of the log-sum-exp
         cql_importance_sample=True,  # CQL(H) with importance weights (CQL paper, App. F)
         cql_clip_diff_min=-1e9,  # clip of logsumexp − Q_data (JaxCQL; ±inf = no clip)
-        cql_clip_diff_max=1e9,
+        cql_clip_diff_max=1e9,  # upper clip of that difference
         backup_entropy=False,  # no entropy term in the TD target (CQL)
         autotune_temperature=True,  # learn SAC's α towards target_entropy
         init_temperature=1.0,  # initial SAC α
         target_entropy=None,  # None = −|A| (SAC)
         log_std_min=-20.0,  # clip of the policy's log-std (JaxCQL)
-        log_std_max=2.0,
+        log_std_max=2.0,  # upper clip of the policy's log-std
         batch_size=256,  # minibatch size (256 state, 64 pixels in D5RL)
         **ENCODER_DEFAULTS,
     )

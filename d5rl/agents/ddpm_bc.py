@@ -136,7 +136,7 @@ class DDPMBCAgent(Agent):
 
 def get_config() -> Config:
     return Config(
-        agent_name="ddpm_bc",
+        agent_name="ddpm_bc",  # name in d5rl.agents.AGENTS
         batch_size=256,  # minibatch size (256 state, 64 pixels in D5RL)
         action_dim=None,  # set by create() from the example actions
         **diffusion_config(),

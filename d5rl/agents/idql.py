@@ -99,7 +99,7 @@ class IDQLAgent(Agent):
 
 def get_config() -> Config:
     return Config(
-        agent_name="idql",
+        agent_name="idql",  # name in d5rl.agents.AGENTS
         critic_lr=3e-4,  # Q Adam lr (IQL / IDQL)
         value_lr=3e-4,  # V Adam lr (IQL / IDQL)
         critic_hidden_dims=(256, 256),  # MLP widths of Q and V (IDQL)

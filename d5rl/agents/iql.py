@@ -103,7 +103,7 @@ class IQLAgent(Agent):
 
 def get_config() -> Config:
     return Config(
-        agent_name="iql",
+        agent_name="iql",  # name in d5rl.agents.AGENTS
         actor_lr=3e-4,  # policy Adam lr (IQL paper; D5RL pixels: 1e-4)
         critic_lr=3e-4,  # Q Adam lr (IQL paper and D5RL)
         value_lr=3e-4,  # V Adam lr (IQL paper and D5RL)
@@ -116,7 +116,7 @@ def get_config() -> Config:
         num_qs=2,  # clipped double Q
         critic_layer_norm=False,  # LayerNorm in Q and V
         log_std_min=-5.0,  # clip of the policy's log-std (IQL)
-        log_std_max=2.0,
+        log_std_max=2.0,  # upper clip of the policy's log-std
         state_dependent_std=False,  # IQL learns one log-std vector
         batch_size=256,  # minibatch size (256 state, 64 pixels in D5RL)
         **ENCODER_DEFAULTS,

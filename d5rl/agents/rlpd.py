@@ -125,7 +125,7 @@ class RLPDAgent(Agent):
 
 def get_config() -> Config:
     return Config(
-        agent_name="rlpd",
+        agent_name="rlpd",  # name in d5rl.agents.AGENTS
         actor_lr=3e-4,  # Adam learning rate of the policy (RLPD paper, Table 5)
         critic_lr=3e-4,  # Adam learning rate of the critic ensemble
         temp_lr=3e-4,  # Adam learning rate of the SAC temperature
@@ -140,7 +140,7 @@ def get_config() -> Config:
         target_entropy=None,  # None = −|A|/2 (RLPD's choice)
         backup_entropy=True,  # subtract γ·α·log π(a'|s') in the critic target (SAC)
         log_std_min=-20.0,  # clip of the policy's log-std
-        log_std_max=2.0,
+        log_std_max=2.0,  # upper clip of the policy's log-std
         utd_ratio=20,  # critic updates per update() call; batches hold utd_ratio × batch_size (D5RL: 20)
         batch_size=256,  # minibatch size per critic update (256 state, 64 pixels in D5RL)
         offline_ratio=0.5,  # share of every online batch drawn from the offline data (symmetric sampling)

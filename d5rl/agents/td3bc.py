@@ -97,7 +97,7 @@ class TD3BCAgent(Agent):
 
 def get_config() -> Config:
     return Config(
-        agent_name="td3bc",
+        agent_name="td3bc",  # name in d5rl.agents.AGENTS
         actor_lr=3e-4,  # policy Adam lr (TD3+BC paper)
         critic_lr=3e-4,  # Q Adam lr (TD3+BC paper)
         hidden_dims=(256, 256),  # MLP widths (TD3+BC paper)

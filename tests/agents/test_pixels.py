@@ -1,0 +1,46 @@
+"""Pixel observations (two 16×16 cameras, 3 stacked frames, proprio) through every agent."""
+
+import jax
+import numpy as np
+import pytest
+
+from d5rl.agents import AGENTS
+from d5rl.training.toy import toy_dataset
+from tests.agents.helpers import make_agent
+
+_DS = {}
+
+
+def pixel_batch(n, seed=0):
+    if "ds" not in _DS:
+        _DS["ds"] = toy_dataset(8, pixels=True)
+    b = _DS["ds"].sample(n, np.random.default_rng(seed), frame_stack=3, mc_gamma=0.99)
+    keep = ("observations", "actions", "rewards", "masks", "next_observations", "mc_returns")
+    return {k: (b[k] if isinstance(b[k], dict) else np.asarray(b[k], np.float32)) for k in keep}
+
+
+def check_agent(name):
+    b = pixel_batch(16)
+    assert b["observations"]["pixels/front"].shape == (16, 16, 16, 9)
+    agent = make_agent(name, _DS["ds"], batch_size=8, **({"num_samples": 2} if name == "idql" else {}))
+    agent = type(agent).create(0, b["observations"], b["actions"], agent.config)
+    per = 8 * agent.config.get("utd_ratio", 1)
+    params0 = jax.tree_util.tree_leaves(agent.actor.params)
+    agent, m = agent.update(jax.tree_util.tree_map(lambda x: x[:per], b))
+    assert all(np.isfinite(float(v)) for v in m.values()), m
+    changed = [not np.allclose(a, c) for a, c in zip(params0, jax.tree_util.tree_leaves(agent.actor.params))]
+    assert any(changed)
+    single = jax.tree_util.tree_map(lambda x: x[0], b["observations"])
+    a = np.asarray(agent.sample_actions(single, seed=jax.random.PRNGKey(0)))
+    assert a.shape == (2,) and np.all(np.abs(a) <= 1)
+    assert np.asarray(agent.eval_actions(b["observations"])).shape == (16, 2)
+
+
+def test_pixel_bc():
+    check_agent("bc")
+
+
+@pytest.mark.slow
+@pytest.mark.parametrize("name", [n for n in AGENTS if n != "bc"])
+def test_pixel_agents(name):
+    check_agent(name)
