@@ -240,6 +240,8 @@ def build_parser() -> argparse.ArgumentParser:
 _PLUGINS = [
     ("d5rl.training.cli", "add_train_parser"),
     ("d5rl.training.cli", "add_eval_parser"),
+    ("d5rl.runner.cli", "add_bench_parser"),
+    ("d5rl.runner.cli", "add_report_parser"),
     ("d5rl.envs.kitchen.d4rl_import", "add_import_d4rl_kitchen_parser"),
     ("d5rl.envs.a1.calibrate", "add_calibrate_parser"),
 ]
