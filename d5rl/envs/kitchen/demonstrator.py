@@ -66,6 +66,8 @@ class Phase:
     speed: float = 1.0  # multiplies the controller's speed limits
     freeze: bool = False  # evaluate ``target`` once when the phase starts (relative moves)
     min_steps: int = 0  # never end before this many steps (e.g. while a glide is under way)
+    any_roll: bool = True  # the hand may be turned half a turn about its axis (symmetric grasps)
+    roll_room: float = 0.0  # the last joint must keep this much room (rad, positive) for a later turn
 
 
 class Context:
@@ -128,7 +130,7 @@ class Controller:
     POSTURE_GAIN = np.array([0.5, 0.5, 0.5, 0.5, 0.0, 0.0, 0.0])
     ROT_WEIGHT = 0.4
 
-    def __init__(self, env, max_lin: float = 0.7, max_ang: float = 1.8, gain: float = 4.0, damping: float = 0.05):
+    def __init__(self, env, max_lin: float = 0.8, max_ang: float = 2.0, gain: float = 4.0, damping: float = 0.05):
         self.env = env
         self.model, self.data = env.model, env.data
         self.site = env.model.site(km.END_EFFECTOR_SITE).id
@@ -178,6 +180,22 @@ class Controller:
         act[:7] = qdot / (ACTION_SCALE * self.TRACKING)
         act[7:] = grip
         return np.clip(act, -1.0, 1.0)
+
+    def best_roll(self, rot: np.ndarray, room: float = 0.0) -> bool:
+        """Whether to use ``rot`` turned half a turn about the gripper axis instead (the parallel
+        gripper is symmetric): pick the roll that keeps the last joint away from its limits and
+        turns the hand least."""
+        z = self.data.site_xmat[self.site].reshape(3, 3)[:, 2]
+        q7, lo, hi = self.data.qpos[6], self.lo[6] + 0.25, self.hi[6] - 0.25
+        best, best_cost = False, np.inf
+        for flip in (False, True):
+            r = rot @ rot_z(np.pi) if flip else rot
+            turn = float(orientation_error(r, self.data.site_xmat[self.site].reshape(3, 3)) @ z)
+            q_after = q7 + turn
+            cost = abs(turn) + (10.0 if not (lo <= q_after and q_after + room <= hi) else 0.0)
+            if cost < best_cost:
+                best, best_cost = flip, cost
+        return best
 
     def reached(self, pos: np.ndarray, rot: np.ndarray, tol: float, rot_tol: float) -> bool:
         d = self.data
@@ -281,8 +299,10 @@ def _knob(ctx: Context, knob_body: str, joint: str, goal: float) -> Iterator[Pha
     center = plate - np.array([0, FINGERTIP + 0.008, 0])
     rot = R_FORWARD  # fingers across the ridge
     n = _approach_dir(rot)
-    yield Phase("pre-grasp", _fixed(center - (0.10 + ctx.rng.uniform(0, 0.04)) * n, rot), tol=0.03, rot_tol=0.25)
-    yield Phase("reach", _fixed(center, rot), tol=0.02, max_steps=20, speed=0.8)
+    # the wrist turns the knob by ~1.2 rad: approach with the hand roll that leaves the last joint room
+    yield Phase("pre-grasp", _fixed(center - (0.10 + ctx.rng.uniform(0, 0.04)) * n, rot), tol=0.03, rot_tol=0.25,
+                roll_room=1.3)
+    yield Phase("reach", _fixed(center, rot), tol=0.02, max_steps=20, speed=0.8, roll_room=1.3)
     yield Phase("grasp", _fixed(center, rot), grip=CLOSE, done=_never, max_steps=4)
 
     def turn(c: Context):
@@ -297,7 +317,15 @@ def _knob(ctx: Context, knob_body: str, joint: str, goal: float) -> Iterator[Pha
         stalled = len(history) > 6 and abs(history[-1] - history[-5]) < 0.01
         return q <= goal + 0.15 or (stalled and q <= goal + 0.3)
 
-    yield Phase("turn", turn, grip=CLOSE, done=turned, max_steps=30, speed=0.8)
+    flipped = {}
+
+    def turn_same_roll(c: Context):  # keep the roll the hand grasped with
+        pos, r = turn(c)
+        if "flip" not in flipped:
+            flipped["flip"] = np.linalg.norm(orientation_error(r, c.ee_rot)) > np.pi / 2
+        return pos, (r @ rot_z(np.pi) if flipped["flip"] else r)
+
+    yield Phase("turn", turn_same_roll, grip=CLOSE, done=turned, max_steps=30, speed=0.8, any_roll=False)
     yield _hold("release", OPEN, 3)
     yield Phase("retreat", lambda c: (c.ee_pos - 0.10 * n, c.ee_rot), tol=0.04, rot_tol=9, max_steps=15, freeze=True)
 
@@ -401,10 +429,10 @@ class Style:
     @staticmethod
     def sample(rng: np.random.Generator) -> "Style":
         return Style(
-            speed=float(rng.uniform(0.8, 1.15)),
+            speed=float(rng.uniform(0.9, 1.25)),
             noise=float(rng.uniform(0.01, 0.05)),
-            pause_prob=float(rng.uniform(0.0, 0.25)),
-            via_prob=float(rng.uniform(0.0, 0.5)),
+            pause_prob=float(rng.uniform(0.0, 0.15)),
+            via_prob=float(rng.uniform(0.0, 0.3)),
         )
 
 
@@ -425,6 +453,7 @@ class Demonstrator:
         self._queue = self._phases()
         self._phase: Phase | None = None
         self._frozen = None
+        self._flip = False
         self._steps = 0
         self._pause = 0
         self.current_subtask: str | None = None
@@ -445,7 +474,7 @@ class Demonstrator:
 
     def _next_phase(self) -> None:
         if self._phase is not None:
-            pos, rot = self._frozen if self._frozen is not None else self._phase.target(self.ctx)
+            pos, rot = self._target()
             self.log.append((self.current_subtask, self._phase.name, self._steps,
                              round(float(np.linalg.norm(pos - self.ctx.ee_pos)), 3)))
         try:
@@ -456,6 +485,8 @@ class Demonstrator:
             return
         self._steps = 0
         self._frozen = self._phase.target(self.ctx) if self._phase.freeze else None
+        self._flip = False
+        self._flip = self._phase.any_roll and self.ctrl.best_roll(self._target()[1], self._phase.roll_room)
         if self.rng.random() < self.style.pause_prob:
             self._pause = int(self.rng.integers(1, 5))
 
@@ -468,8 +499,12 @@ class Demonstrator:
             return False
         if ph.done is not None:
             return ph.done(self.ctx)
-        pos, rot = self._frozen if self._frozen is not None else ph.target(self.ctx)
+        pos, rot = self._target()
         return self.ctrl.reached(pos, rot, ph.tol, ph.rot_tol)
+
+    def _target(self) -> tuple[np.ndarray, np.ndarray]:
+        pos, rot = self._frozen if self._frozen is not None else self._phase.target(self.ctx)
+        return pos, (rot @ rot_z(np.pi) if self._flip else rot)
 
     def act(self) -> np.ndarray:
         if self._phase is None and not self.finished:
@@ -482,7 +517,7 @@ class Demonstrator:
             return hold
         ph = self._phase
         self.ctx.phase_step = self._steps
-        pos, rot = self._frozen if self._frozen is not None else ph.target(self.ctx)
+        pos, rot = self._target()
         self._steps += 1
         if self._pause > 0:
             self._pause -= 1
