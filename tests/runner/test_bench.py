@@ -224,15 +224,15 @@ def test_killed_sweep_resumes_without_redoing_finished_cells(tmp_path):
 def test_cli_bench_and_report(tmp_path):
     run_dir = tmp_path / "run"
     cmd = [sys.executable, "-m", "d5rl.runner", "bench", "--tasks", ",".join(TASKS), "--algos", "bc", "iql",
-           "--seeds", "0-1", "--offline-steps", "40", "--eval-interval", "20", "--eval-episodes", "2",
+           "--seeds", "0-0", "--offline-steps", "40", "--eval-interval", "20", "--eval-episodes", "2",
            "--job", toy.JOB, "--workers", "2", "--out", str(run_dir), "--no-progress", "--no-tuned"]
     out = subprocess.run(cmd, cwd=REPO, capture_output=True, text=True, timeout=120)
     assert out.returncode == 0, out.stderr
-    assert "8 finished, 0 already done, 0 failed" in out.stderr
+    assert "4 finished, 0 already done, 0 failed" in out.stderr
     assert (run_dir / "report" / "table1_offline.md").exists()
     assert not (run_dir / "report" / "table2_online.md").exists()  # no online phase was run
     out = subprocess.run(cmd, cwd=REPO, capture_output=True, text=True, timeout=120)
-    assert "0 finished, 8 already done" in out.stderr
+    assert "0 finished, 4 already done" in out.stderr
     out = subprocess.run([sys.executable, "-m", "d5rl.runner", "report", str(run_dir), "--no-plots", "--reps", "100",
                           "--print"], cwd=REPO, capture_output=True, text=True, timeout=120)
     assert out.returncode == 0 and "| BC | IQL |" in out.stdout
