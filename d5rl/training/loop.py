@@ -273,6 +273,7 @@ def train(
     def checkpoint():
         save_checkpoint(run_dir, {"agent": agent.to_bytes(), "rng": rng.bit_generator.state, "step": step,
                                   "online_done": online_done, "episode": episode,
+                                  "metric_sums": dict(acc), "metric_count": acc_n,
                                   "online_started": step > offline_steps or (online_done > 0)}, buffer)
 
     def run_eval(at_step: int, episodes: int) -> dict:
@@ -286,8 +287,8 @@ def train(
 
     total = offline_steps + online_steps
     bar = _Progress(total, step, cfg.progress)
-    acc: dict[str, float] = {}
-    acc_n = 0
+    acc: dict[str, float] = dict(resume[0].get("metric_sums", {})) if resume is not None else {}
+    acc_n = int(resume[0].get("metric_count", 0)) if resume is not None else 0
     t_window, n_window = time.perf_counter(), 0
 
     def record(metrics, n_updates: int):

@@ -1,0 +1,72 @@
+"""``d5rl train`` and ``d5rl eval`` (wired into :mod:`d5rl.cli` by ``add_*_parser``)."""
+
+from __future__ import annotations
+
+import argparse
+import json
+
+
+def add_train_parser(subparsers) -> argparse.ArgumentParser:
+    from d5rl.agents import AGENTS
+
+    p = subparsers.add_parser(
+        "train", help="train a reference agent offline (and optionally fine-tune online)",
+        description="Train ALGO on TASK. Runs resume from their checkpoint when started again with the same "
+                    "--run-dir. Config keys (agent and loop) are set with --set key=value; "
+                    "see `d5rl train ALGO TASK --show-config`.")
+    p.add_argument("algo", choices=sorted(AGENTS), help="agent")
+    p.add_argument("task", help="task id (or toy-reach-v0 / toy-reach-pixels-v0)")
+    p.add_argument("--offline-steps", type=int, default=None, help="gradient updates on the dataset "
+                   "(default 500000; 0 for RLPD)")
+    p.add_argument("--online-steps", type=int, default=0, help="environment steps of online fine-tuning")
+    p.add_argument("--seed", type=int, default=0)
+    p.add_argument("--set", dest="overrides", action="append", default=[], metavar="KEY=VALUE",
+                   help="override a config value (repeatable)")
+    p.add_argument("--run-dir", default=None, help="default: runs/TASK/ALGO/seedS")
+    p.add_argument("--show-config", action="store_true", help="print the resolved config and exit")
+    p.set_defaults(func=cmd_train)
+    return p
+
+
+def cmd_train(args) -> int:
+    from d5rl.agents import get_agent
+    from d5rl.training.loop import get_train_config, split_overrides, train
+
+    _, config_fn = get_agent(args.algo)
+    agent_cfg, train_cfg = split_overrides(args.overrides, config_fn(), get_train_config())
+    if args.show_config:
+        print(json.dumps({"agent": agent_cfg.to_dict(), "train": train_cfg.to_dict()}, indent=2))
+        return 0
+    offline = args.offline_steps
+    if offline is None:
+        offline = 0 if agent_cfg.agent_name == "rlpd" and args.online_steps else 500_000
+    res = train(args.algo, args.task, offline, args.online_steps, args.seed, args.overrides, args.run_dir)
+    res.pop("agent", None)
+    print(json.dumps(res, indent=2))
+    return 0
+
+
+def add_eval_parser(subparsers) -> argparse.ArgumentParser:
+    p = subparsers.add_parser("eval", help="evaluate a trained agent from its run directory")
+    p.add_argument("run_dir", help="directory written by `d5rl train`")
+    p.add_argument("--episodes", type=int, default=10)
+    p.add_argument("--envs", type=int, default=5, help="environments stepped in lockstep")
+    p.add_argument("--processes", action="store_true", help="one process per environment")
+    p.add_argument("--seed", type=int, default=12345, help="episode i resets with seed + i")
+    p.add_argument("--video", default=None, metavar="PATH", help="record the first episode (mp4)")
+    p.add_argument("--task", default=None, help="evaluate on another task id (same spaces)")
+    p.set_defaults(func=cmd_eval)
+    return p
+
+
+def cmd_eval(args) -> int:
+    from d5rl.training.evaluation import evaluate
+    from d5rl.training.loop import load_run
+
+    agent, resolved = load_run(args.run_dir)
+    task = args.task or resolved["task_id"]
+    res = evaluate(agent, task, args.episodes, args.seed, num_envs=args.envs,
+                   frame_stack=resolved["train"]["frame_stack"], processes=args.processes, video_path=args.video)
+    res.pop("returns", None)
+    print(json.dumps({"task_id": task, **res}, indent=2))
+    return 0

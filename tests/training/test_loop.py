@@ -1,0 +1,71 @@
+"""The training loop: run directory contents, exact resume after a kill, NaN detection, overrides."""
+
+import json
+
+import jax
+import numpy as np
+import pytest
+
+from d5rl.agents.config import ConfigError
+from d5rl.training.loop import NonFiniteLossError, load_run, train
+from d5rl.training.toy import toy_dataset
+
+SMALL = {"hidden_dims": "32,32", "batch_size": "32", "eval_episodes": "2", "eval_envs": "2",
+         "log_interval": "16", "progress": "false", "tensorboard": "false"}
+
+
+def overrides(**kw):
+    return [f"{k}={v}" for k, v in {**SMALL, **kw}.items()]
+
+
+def leaves(agent):
+    return [np.asarray(x) for x in jax.tree_util.tree_leaves(agent)]
+
+
+def rows(run_dir):
+    out = []
+    for line in (run_dir / "metrics.jsonl").read_text().splitlines():
+        r = json.loads(line)
+        out.append({k: v for k, v in r.items() if not k.startswith("time/")})
+    return out
+
+
+def test_offline_run_writes_everything(tmp_path):
+    ds = toy_dataset(20)
+    res = train("iql", "toy-reach-v0", 64, 0, 0, overrides(eval_interval=32, checkpoint_interval=32),
+                tmp_path / "run", dataset=ds)
+    run = tmp_path / "run"
+    for name in ("config.json", "metrics.jsonl", "metrics.csv", "summary.json", "checkpoint/state.pkl"):
+        assert (run / name).exists(), name
+    cfg = json.loads((run / "config.json").read_text())
+    assert cfg["agent"]["hidden_dims"] == [32, 32] and cfg["train"]["frame_stack"] == 1
+    header = (run / "metrics.csv").read_text().splitlines()[0].split(",")
+    assert "critic/loss" in header and "eval/toy-reach-v0/score" in header and "time/updates_per_s" in header
+    assert res["step"] == 64 and np.isfinite(res["score"])
+    agent, resolved = load_run(run)
+    for a, b in zip(leaves(agent), leaves(res["agent"])):
+        np.testing.assert_array_equal(a, b)
+
+
+def test_nan_rewards_stop_the_run(tmp_path):
+    ds = toy_dataset(10)
+    ds.arrays["rewards"] = np.full_like(ds.arrays["rewards"], np.nan)
+    with pytest.raises(NonFiniteLossError, match="critic/loss") as e:
+        train("iql", "toy-reach-v0", 32, 0, 0, overrides(), tmp_path / "n", dataset=ds)
+    assert e.value.hint
+
+
+def test_overrides_are_checked(tmp_path):
+    with pytest.raises(ConfigError, match="unknown config key"):
+        train("bc", "toy-reach-v0", 8, 0, 0, ["no_such_key=1"], tmp_path / "o", dataset=toy_dataset(5))
+    with pytest.raises(ConfigError):
+        train("bc", "toy-reach-v0", 8, 0, 0, ["batch_size=big"], tmp_path / "o", dataset=toy_dataset(5))
+
+
+def test_other_run_in_directory_is_refused(tmp_path):
+    from d5rl.training.loop import RunDirError
+
+    ds = toy_dataset(5)
+    train("bc", "toy-reach-v0", 8, 0, 0, overrides(), tmp_path / "r", dataset=ds)
+    with pytest.raises(RunDirError):
+        train("bc", "toy-reach-v0", 8, 0, 0, overrides(actor_lr=1e-3), tmp_path / "r", dataset=ds)

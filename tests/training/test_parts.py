@@ -1,0 +1,74 @@
+"""Replay buffer, logger, evaluation and CLI parsers."""
+
+import argparse
+import json
+
+import numpy as np
+
+from d5rl.training.logger import Logger
+from d5rl.training.replay import NO_RETURN, ReplayBuffer
+
+
+def test_replay_buffer_roundtrip_and_mc_returns():
+    obs = {"pixels/a": np.zeros((4, 4, 3), np.uint8), "proprio": np.zeros(2, np.float32)}
+    buf = ReplayBuffer(obs, 2, capacity=5)
+    idx = []
+    for t in range(3):
+        o = {"pixels/a": np.full((4, 4, 3), t, np.uint8), "proprio": np.full(2, t, np.float32)}
+        idx.append(buf.insert(o, np.full(2, t), 1.0, 1.0, o))
+    assert buf.data["mc_returns"][0] == NO_RETURN
+    buf.set_mc_returns(idx, [1.0, 1.0, 1.0], gamma=0.5)
+    np.testing.assert_allclose(buf.data["mc_returns"][:3], [1.75, 1.5, 1.0])
+    for t in range(4):  # wraps around
+        buf.insert(obs, np.zeros(2), 0.0, 0.0, obs)
+    assert len(buf) == 5 and buf.pos == 2
+    b = buf.sample(7, np.random.default_rng(0))
+    assert b["observations"]["pixels/a"].shape == (7, 4, 4, 3) and b["actions"].shape == (7, 2)
+    other = ReplayBuffer(obs, 2, capacity=5)
+    other.load_state_dict(buf.state_dict())
+    b2 = other.sample(7, np.random.default_rng(0))
+    for k in ("actions", "rewards", "masks"):
+        np.testing.assert_array_equal(b[k], b2[k])
+    np.testing.assert_array_equal(b["observations"]["pixels/a"], b2["observations"]["pixels/a"])
+
+
+def test_logger_grows_columns_and_truncates(tmp_path):
+    log = Logger(tmp_path, tensorboard=False)
+    log.log(10, {"a": 1.0})
+    log.log(20, {"a": 2.0, "b": float("nan")})
+    log.log(30, {"a": 3.0})
+    header = (tmp_path / "metrics.csv").read_text().splitlines()[0]
+    assert header == "step,a,b"
+    log2 = Logger(tmp_path, tensorboard=False)
+    log2.truncate_after(20)
+    lines = (tmp_path / "metrics.jsonl").read_text().splitlines()
+    assert [json.loads(x)["step"] for x in lines] == [10, 20]
+    assert json.loads(lines[1])["b"] == "nan"
+    assert len((tmp_path / "metrics.csv").read_text().splitlines()) == 3
+
+
+def test_evaluation_does_not_depend_on_env_count():
+    from d5rl.training.evaluation import evaluate
+    from tests.agents.helpers import make_agent
+
+    agent = make_agent("bc")
+    one = evaluate(agent, "toy-reach-v0", 4, seed=3, num_envs=1)
+    four = evaluate(agent, "toy-reach-v0", 4, seed=3, num_envs=4)
+    np.testing.assert_allclose(one["returns"], four["returns"], rtol=1e-6)
+    assert one["length"] == 25 and 0 <= one["success"] <= 1
+
+
+def test_cli_parsers(tmp_path, capsys):
+    from d5rl.training.cli import add_eval_parser, add_train_parser
+
+    parser = argparse.ArgumentParser()
+    sub = parser.add_subparsers()
+    add_train_parser(sub)
+    add_eval_parser(sub)
+    args = parser.parse_args(["train", "iql", "toy-reach-v0", "--set", "expectile=0.9", "--set",
+                              "eval_interval=5", "--show-config"])
+    assert args.func(args) == 0
+    shown = json.loads(capsys.readouterr().out)
+    assert shown["agent"]["expectile"] == 0.9 and shown["train"]["eval_interval"] == 5
+    args = parser.parse_args(["eval", str(tmp_path), "--episodes", "3"])
+    assert args.episodes == 3 and args.func.__name__ == "cmd_eval"
