@@ -126,7 +126,7 @@ class Controller:
     # The position servos reach about half the commanded joint velocity within a 0.08 s step
     # (measured: action 0.5 -> 0.50 rad/s on the shoulder, 0.63 rad/s on the wrist).
     TRACKING = 0.5
-    # null-space pull towards the rest posture: shoulder and elbow only, the wrist turns freely
+    # null-space pull towards the rest posture (the last two wrist joints turn freely)
     POSTURE_GAIN = np.array([0.5, 0.5, 0.5, 0.5, 0.0, 0.0, 0.0])
     ROT_WEIGHT = 0.4
 
@@ -340,13 +340,15 @@ def top_burner(ctx: Context) -> Iterator[Phase]:
 
 def light_switch(ctx: Context) -> Iterator[Phase]:
     tip = ctx.site("light_site")
-    rot = R_FORWARD
-    side = np.array([0.05 + ctx.rng.uniform(0, 0.01), 0.0, ctx.rng.uniform(-0.005, 0.005)])
-    yield Phase("pre-push", _fixed(tip + side + np.array([0, -0.10, 0]), rot), grip=CLOSE, tol=0.03, rot_tol=0.25)
-    yield Phase("reach", _fixed(tip + side + np.array([0, -0.01, 0]), rot), grip=CLOSE, tol=0.012, max_steps=30,
-                speed=0.8)
+    rot = R_FORWARD  # (the half-turned hand would need the 5th joint past its limit to push)
+    # push a little below the lever's axis so the fingers do not ride over it
+    side = np.array([0.05 + ctx.rng.uniform(0, 0.01), 0.0, ctx.rng.uniform(-0.012, -0.004)])
+    yield Phase("pre-push", _fixed(tip + side + np.array([0, -0.10, 0]), rot), grip=CLOSE, tol=0.03, rot_tol=0.25,
+                any_roll=False)
+    yield Phase("reach", _fixed(tip + side + np.array([0, -0.01, 0]), rot), grip=CLOSE, tol=0.012, rot_tol=0.06,
+                max_steps=30, speed=0.8, any_roll=False)
     yield Phase("push", _fixed(tip + np.array([-0.12, -0.01, side[2]]), rot), grip=CLOSE,
-                done=lambda c: c.joint("light_switch") <= -0.6, max_steps=40, speed=0.8)
+                done=lambda c: c.joint("light_switch") <= -0.6, max_steps=40, speed=0.5, any_roll=False)
     yield Phase("retreat", lambda c: (c.ee_pos + np.array([0, -0.12, 0]), rot), grip=CLOSE, tol=0.04, rot_tol=9,
                 max_steps=15, freeze=True)
 
@@ -386,11 +388,11 @@ def kettle(ctx: Context) -> Iterator[Phase]:
     yield Phase("reach", lambda c: (c.site("kettle_site") + offset, rot), tol=0.01, max_steps=25, speed=0.8)
     yield _hold("grasp", CLOSE, 5)
     lift = ctx.rng.uniform(0.07, 0.09)
-    n_lift = int(ctx.rng.integers(6, 9))
+    n_lift = int(ctx.rng.integers(5, 8))
     yield Phase("lift", _glide(None, lift * up, rot, n_lift, relative=True), grip=CLOSE, done=_never,
                 max_steps=n_lift + 2)
     goal = KETTLE_GOAL_HANDLE + np.array([ctx.rng.uniform(-0.01, 0.01), ctx.rng.uniform(-0.005, 0.015), 0.0])
-    n_carry = int(ctx.rng.integers(18, 26))
+    n_carry = int(ctx.rng.integers(15, 21))
     yield Phase("carry", _glide(None, goal + lift * up, rot, n_carry), grip=CLOSE, tol=0.02, rot_tol=0.3,
                 min_steps=n_carry, max_steps=n_carry + 15)
     yield Phase("lower", _glide(None, goal + 0.005 * up, rot, n_lift), grip=CLOSE, done=_never,
