@@ -14,7 +14,7 @@ os.environ.setdefault("MUJOCO_GL", "egl")
 __version__ = "0.1.0"
 
 from d5rl.errors import D5RLError  # noqa: E402
-from d5rl.registry import get_spec, list_tasks, make_env, normalize_score, parse_task_id  # noqa: E402
+from d5rl.registry import episode_score, get_spec, list_tasks, make_env, normalize_score, parse_task_id  # noqa: E402
 
 
 def load_dataset(task_id: str, **kwargs):
@@ -39,6 +39,7 @@ def make(task_id: str, *, generate: bool = True, dataset_kwargs: dict | None = N
 __all__ = [
     "D5RLError",
     "__version__",
+    "episode_score",
     "get_spec",
     "list_tasks",
     "load_dataset",

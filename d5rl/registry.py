@@ -88,6 +88,10 @@ class TaskSpec:
     # (e.g. rewards, terminals) when this task labels a shared dataset differently.
     relabel: str | None = None
     score: ScoreRef | None = None
+    # Where an episode's normalized score comes from: "return" normalizes the episode
+    # return with ``score``; "info" takes ``info["score"]`` of the episode's last step
+    # (tasks whose reward is paid every step, e.g. objects currently in place).
+    score_from: str = "return"
     # How the normalized score is defined, for `d5rl info` and the docs.
     score_definition: str = "(return - random) / (expert - random)"
     tags: tuple[str, ...] = ()
@@ -108,6 +112,8 @@ _LOADED = False
 def register(spec: TaskSpec) -> TaskSpec:
     """Add a task (called by family ``registration`` modules at import)."""
     parse_task_id(spec.id)
+    if spec.score_from not in ("return", "info"):
+        raise ValueError(f"{spec.id}: score_from must be 'return' or 'info', got {spec.score_from!r}")
     if spec.id in _REGISTRY and _REGISTRY[spec.id] != spec:
         raise ValueError(f"task {spec.id} registered twice with different specs")
     _REGISTRY[spec.id] = spec
@@ -186,11 +192,26 @@ def make_env(task_id: str, **kwargs: Any):
     return gymnasium.wrappers.TimeLimit(env, max_episode_steps=spec.max_episode_steps)
 
 
+def episode_score(task_id: str, episode_return: float, final_info: dict) -> float:
+    """The normalized score of one finished episode, however the task defines it."""
+    spec = get_spec(task_id)
+    if spec.score_from == "info":
+        if "score" not in final_info:
+            raise KeyError(f"{spec.id} reports its score in info['score'], which the last step's info lacks")
+        return float(final_info["score"])
+    return float(normalize_score(spec, episode_return))
+
+
 def normalize_score(task_id: str, raw_return):
     """Map a raw episode return to the task's normalized score (0 random, 1 expert)."""
     from d5rl.errors import D5RLError
 
     spec = get_spec(task_id)
+    if spec.score_from == "info":
+        raise D5RLError(
+            f"{spec.id}'s score is not a function of the return: {spec.score_definition}",
+            "use d5rl.episode_score(task_id, episode_return, final_info) with the last step's info",
+        )
     if spec.score is None:
         raise D5RLError(
             f"task {task_id} has no reference scores yet",

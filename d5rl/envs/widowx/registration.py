@@ -9,7 +9,7 @@ _ENTRY = "d5rl.envs.widowx.task:WidowXSortingEnv"
 _GENERATOR = "d5rl.envs.widowx.data:WidowXScriptedGenerator"
 _RENDERS = "d5rl.envs.widowx.data:renders"  # side-camera frames, rendered from stored states on load
 # The normalized score is not a function of the return (the reward counts sorted objects at
-# every step), so there is no ScoreRef: evaluators read info["score"] at the episode's end.
+# every step): score_from="info" makes evaluators read info["score"] at the episode's end.
 _SCORE_DEFINITION = (
     "fraction of the two objects in their correct bin at the end of the episode "
     "(info['score'] at the episode's end = final-step reward / 2; 1.0 = both sorted)"
@@ -33,7 +33,7 @@ register(
             description="2,000 scripted episodes (120 steps) picking and placing both objects in succession; "
             "each goes to the wrong bin with probability 0.3. States + proprio; camera frames are re-rendered.",
         ),
-        score=None,
+        score_from="info",
         score_definition=_SCORE_DEFINITION,
         tags=("pixels", "multi-stage", "scripted"),
     )
@@ -56,7 +56,7 @@ register(
             description="2,000 scripted episodes (60 steps) picking one of the two objects and placing it "
             "(correct bin with probability 0.7). States + proprio; camera frames are re-rendered.",
         ),
-        score=None,
+        score_from="info",
         score_definition=_SCORE_DEFINITION,
         tags=("pixels", "multi-stage", "scripted"),
     )
