@@ -127,7 +127,7 @@ class Controller:
     # (measured: action 0.5 -> 0.50 rad/s on the shoulder, 0.63 rad/s on the wrist).
     TRACKING = 0.5
     # null-space pull towards the rest posture (the last two wrist joints turn freely)
-    POSTURE_GAIN = np.array([0.5, 0.5, 0.5, 0.5, 0.0, 0.0, 0.0])
+    POSTURE_GAIN = np.array([0.5, 0.5, 0.5, 0.5, 0.15, 0.0, 0.0])
     ROT_WEIGHT = 0.4
 
     def __init__(self, env, max_lin: float = 0.8, max_ang: float = 2.0, gain: float = 4.0, damping: float = 0.05):
@@ -392,7 +392,7 @@ def kettle(ctx: Context) -> Iterator[Phase]:
     yield Phase("lift", _glide(None, lift * up, rot, n_lift, relative=True), grip=CLOSE, done=_never,
                 max_steps=n_lift + 2)
     goal = KETTLE_GOAL_HANDLE + np.array([ctx.rng.uniform(-0.01, 0.01), ctx.rng.uniform(-0.005, 0.015), 0.0])
-    n_carry = int(ctx.rng.integers(15, 21))
+    n_carry = int(ctx.rng.integers(18, 26))
     yield Phase("carry", _glide(None, goal + lift * up, rot, n_carry), grip=CLOSE, tol=0.02, rot_tol=0.3,
                 min_steps=n_carry, max_steps=n_carry + 15)
     yield Phase("lower", _glide(None, goal + 0.005 * up, rot, n_lift), grip=CLOSE, done=_never,
@@ -419,6 +419,9 @@ SCRIPTS: dict[str, Callable[[Context], Iterator[Phase]]] = {
 
 
 # --- the policy -----------------------------------------------------------------------------------
+TRANSIT_DISTANCE = 0.4  # moves longer than this (m) between subtasks go via a pulled-back point
+TRANSIT_Y = 0.38
+
 @dataclasses.dataclass(frozen=True)
 class Style:
     """One operator's habits for an episode (drawn by :meth:`Style.sample`)."""
@@ -467,6 +470,16 @@ class Demonstrator:
             self.current_subtask = name
             first = True
             for ph in SCRIPTS[name](self.ctx):
+                if first:
+                    start, goal = self.ctx.ee_pos, ph.target(self.ctx)
+                    if np.linalg.norm(goal[0] - start) > TRANSIT_DISTANCE:
+                        # long moves go through a point pulled back towards the robot, away from the
+                        # cabinets, turning the hand on the way
+                        mid = 0.5 * (start + goal[0])
+                        mid[1] = min(mid[1], TRANSIT_Y) + self.rng.uniform(-0.03, 0.03)
+                        mid[2] = np.clip(mid[2], 2.0, 2.35)
+                        yield Phase("transit", _fixed(mid, goal[1]), grip=ph.grip, tol=0.06, rot_tol=0.5,
+                                    max_steps=25)
                 if first and self.rng.random() < self.style.via_prob:
                     via = self.ctx.ee_pos + self.rng.uniform([-0.08, -0.1, -0.02], [0.08, 0.02, 0.1])
                     yield Phase("via", _fixed(via, self.ctx.ee_rot), grip=ph.grip, tol=0.04, rot_tol=9, max_steps=8)
@@ -489,6 +502,8 @@ class Demonstrator:
         self._frozen = self._phase.target(self.ctx) if self._phase.freeze else None
         self._flip = False
         self._flip = self._phase.any_roll and self.ctrl.best_roll(self._target()[1], self._phase.roll_room)
+        self._errs: list[float] = []
+        self._retried = False
         if self.rng.random() < self.style.pause_prob:
             self._pause = int(self.rng.integers(1, 5))
 
@@ -520,6 +535,12 @@ class Demonstrator:
         ph = self._phase
         self.ctx.phase_step = self._steps
         pos, rot = self._target()
+        # stuck (a wrist joint at its limit)? try once with the hand turned the other way round
+        self._errs.append(float(np.linalg.norm(pos - self.ctx.ee_pos)))
+        if (ph.any_roll and ph.name.startswith("pre") and not self._retried and len(self._errs) > 8
+                and self._errs[-1] > 2 * ph.tol and self._errs[-7] - self._errs[-1] < 0.005):
+            self._flip, self._retried = not self._flip, True
+            pos, rot = self._target()
         self._steps += 1
         if self._pause > 0:
             self._pause -= 1
