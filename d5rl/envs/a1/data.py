@@ -4,8 +4,7 @@ The paper's A1 data are the replay buffers of RL agents, "from first exploration
 expert".  Training those agents (``d5rl.envs.a1.experts``) takes hours, so the
 repository ships what training produced: for each agent, its actor at every
 snapshot and how many episodes each snapshot collected (``policies/<agent>/log.json``).
-Episode ``i`` of the dataset is the ``i``-th training episode in that chronology,
-re-collected by the snapshot that was acting then (uniform random actions before
+Every training episode is re-collected by the snapshot that was acting then (uniform random actions before
 learning started), with the SAC policy's own sampling noise.  Per-step reward terms
 are stored in ``infos/*`` so each task relabels rewards for its own target.
 """
@@ -38,13 +37,23 @@ def agent_log(agent: str, policy_dir: str = str(POLICY_DIR)) -> dict:
     return json.loads(path.read_text())
 
 
+ORDER_SEED = 0  # the fixed shuffle of the buffers' episodes (part of the generator version)
+
+
 def episode_table(agents: tuple[str, ...]) -> list[tuple[str, int]]:
-    """(agent, segment) of every dataset episode, agent by agent, in training order."""
+    """(agent, segment) of every dataset episode.
+
+    The merged buffers are shuffled once with a fixed seed, so the first N episodes
+    (``d5rl generate --episodes N``) are a uniform subsample of all stages of all agents
+    rather than the first agent's random exploration; ``meta['training_step']`` keeps
+    the chronology.
+    """
     table = []
     for agent in agents:
         for seg_i, seg in enumerate(agent_log(agent)["segments"]):
             table += [(agent, seg_i)] * int(seg["episodes"])
-    return table
+    order = np.random.default_rng(ORDER_SEED).permutation(len(table))
+    return [table[i] for i in order]
 
 
 def num_episodes(agents: tuple[str, ...]) -> int:
@@ -55,7 +64,7 @@ def num_episodes(agents: tuple[str, ...]) -> int:
 
 
 class ReplayBufferGenerator:
-    """Episode ``i`` = the ``i``-th training episode of the agents, in chronological order."""
+    """Episode ``i`` = training episode ``episode_table(agents)[i]``, re-collected by its snapshot."""
 
     version = "1"
 

@@ -1,0 +1,87 @@
+import dataclasses
+
+import numpy as np
+import pytest
+
+import d5rl
+from d5rl.datasets.generation import episode_rng, make_generator
+from d5rl.envs.a1 import data
+from d5rl.envs.a1.calibrate import evaluate
+from d5rl.envs.a1.experts import AGENTS, POLICY_DIR
+from d5rl.envs.a1.policy import SnapshotPolicy
+
+pytestmark = pytest.mark.skipif(not (POLICY_DIR / "speed-0.5" / "log.json").exists(),
+                                reason="A1 policy snapshots are not trained")
+
+
+def _first_index_of(gen, agent, learned=True):
+    for i, (a, seg) in enumerate(gen.table):
+        if a == agent and (seg > 0) == learned:
+            return i
+    raise AssertionError(f"no episode of {agent}")
+
+
+def test_generator_is_deterministic_and_covers_every_stage():
+    spec = d5rl.get_spec("a1-walk-v0")
+    gen = make_generator(spec)
+    assert len(gen.table) == spec.dataset.num_episodes
+    assert {a for a, _ in gen.table} == {"speed-0.5", "speed-0.8", "speed-1.0"}
+    segs = {(a, s) for a, s in gen.table}
+    for agent in ("speed-0.5", "speed-0.8", "speed-1.0"):
+        assert (agent, 0) in segs  # random exploration before learning
+        assert max(s for a, s in segs if a == agent) >= 3  # several learned snapshots
+    i = _first_index_of(gen, "speed-0.8")
+    a, b = gen.episode(i, episode_rng(0, i)), make_generator(spec).episode(i, episode_rng(0, i))
+    for k in a.arrays:
+        np.testing.assert_array_equal(a.arrays[k], b.arrays[k])
+    c = gen.episode(i, episode_rng(1, i))
+    assert not np.array_equal(a.arrays["actions"], c.arrays["actions"])
+
+
+def test_relabel_reproduces_the_agents_own_reward():
+    spec = d5rl.get_spec("a1-walk-v0")
+    gen = make_generator(spec)
+    i = _first_index_of(gen, "speed-0.5")
+    ep = gen.episode(i, episode_rng(0, i))
+    own = dataclasses.replace(spec, env_kwargs={"target_speed": 0.5})
+    np.testing.assert_allclose(data.relabel_speed(own, ep.arrays)["rewards"], ep.arrays["rewards"], atol=1e-3)
+    walk = data.relabel_speed(spec, ep.arrays)["rewards"]
+    assert not np.allclose(walk, ep.arrays["rewards"], atol=1e-2)
+
+
+def test_hiking_relabel_matches_heading_agent_reward():
+    spec = d5rl.get_spec("a1-hiking-v0")
+    gen = make_generator(spec)
+    ep = gen.episode(0, episode_rng(0, 0))
+    np.testing.assert_allclose(data.relabel_hiking(spec, ep.arrays)["rewards"], ep.arrays["rewards"], atol=1e-3)
+    assert ep.arrays["observations"].shape[1] == 60
+
+
+@pytest.mark.slow
+@pytest.mark.parametrize("agent", ["speed-0.5", "speed-0.8", "speed-1.0"])
+def test_final_expert_tracks_its_speed(agent):
+    target, _ = AGENTS[agent]
+    from d5rl.envs.a1.experts import make_env
+
+    env = make_env(agent)
+    policy = SnapshotPolicy(POLICY_DIR / agent / "final.npz")
+    rng = np.random.default_rng(0)
+    speeds, falls = [], 0
+    for ep in range(3):
+        obs, _ = env.reset(seed=ep)
+        for _ in range(400):
+            obs, _, term, _, info = env.step(policy(obs, rng, deterministic=True))
+            speeds.append(info["forward_speed"])
+            if term:
+                falls += 1
+                break
+    assert falls == 0
+    assert abs(np.mean(speeds[40:]) - target) < 0.25 * target + 0.1
+
+
+@pytest.mark.slow
+def test_expert_beats_random_on_walk():
+    rnd = evaluate("a1-walk-v0", SnapshotPolicy(None), 3, 0, deterministic=False).mean()
+    best = max(evaluate("a1-walk-v0", SnapshotPolicy(POLICY_DIR / a / "final.npz"), 3, 0).mean()
+               for a in ("speed-0.5", "speed-0.8", "speed-1.0"))
+    assert best > 2 * rnd
