@@ -61,7 +61,7 @@ def get_train_config() -> Config:
         frame_stack=None,  # stacked frames for pixel observations (None = 3 for pixels, 1 for states)
         offline_ratio=None,  # share of online-phase batches from the offline data (None = agent's, else 0.5)
         start_steps=None,  # random-action env steps before online updates (None = agent's start_steps, else 0)
-        buffer_capacity=None,  # online replay capacity (None = online_steps)
+        buffer_capacity=None,  # online replay capacity (None = online_steps; pixels: at most 20k, ~3 GB at 64²×2 cams)
         dataset_episodes=None,  # train on the first N dataset episodes (None = all)
         save_video=False,  # record the first episode of every evaluation
         tensorboard=True,  # also write TensorBoard events if tensorboardX / torch is installed
@@ -93,6 +93,24 @@ def split_overrides(overrides, agent_config: Config, train_config: Config) -> tu
         return cfg.override([f"{k}={v}" for k, v in pairs])
 
     return apply(agent_config, agent_items), apply(train_config, train_items)
+
+
+TASK_OVERRIDES = Path(__file__).with_name("task_overrides.json")
+
+
+def task_overrides(task_id: str, algo: str, pixels: bool, agent_config: Config) -> dict:
+    """Tuned defaults for this task from ``task_overrides.json`` (keys the agent has)."""
+    import fnmatch
+
+    table = json.loads(TASK_OVERRIDES.read_text())
+    out: dict = {}
+    for pattern, per_agent in table.items():
+        if pattern.startswith("_"):
+            continue
+        if (pattern == "pixels" and pixels) or (pattern != "pixels" and fnmatch.fnmatch(task_id, pattern)):
+            for who in ("all", algo):
+                out.update({k: v for k, v in per_agent.get(who, {}).items() if k in agent_config})
+    return {k: tuple(v) if isinstance(v, list) else v for k, v in out.items()}
 
 
 def default_run_dir(algo: str, task_id: str, seed: int) -> Path:
@@ -218,6 +236,9 @@ def train(
         task_id, **({"episodes": cfg.dataset_episodes} if cfg.dataset_episodes else {}))
     probe = ds.sample(1, np.random.default_rng(0))
     pixels = is_pixel_obs(probe["observations"])
+    defaults = agent_config_fn()
+    defaults = defaults.replace(**task_overrides(task_id, algo, pixels, defaults))
+    agent_cfg, _ = split_overrides(overrides, defaults, get_train_config())
     frame_stack = int(cfg.frame_stack or (3 if pixels else 1))
     needs_mc = algo == "calql"
     gamma = float(agent_cfg.get("discount", 0.99))
@@ -254,6 +275,7 @@ def train(
     offline_ratio = cfg.offline_ratio if cfg.offline_ratio is not None else agent_cfg.get("offline_ratio", 0.5)
     start_steps = cfg.start_steps if cfg.start_steps is not None else agent_cfg.get("start_steps", 0)
     fresh_online = algo == "rlpd" and offline_steps > 0
+    capacity = int(cfg.buffer_capacity or (min(max(online_steps, 1), 20_000) if pixels else max(online_steps, 1)))
 
     if resume is not None:
         state, buf_state = resume
@@ -266,7 +288,7 @@ def train(
         if buf_state is not None:
             env_probe = make_task_env(task_id, frame_stack)
             ex_obs = env_probe.reset(seed=0)[0]
-            buffer = ReplayBuffer(ex_obs, example["actions"].shape[-1], cfg.buffer_capacity or max(online_steps, 1))
+            buffer = ReplayBuffer(ex_obs, example["actions"].shape[-1], capacity)
             buffer.load_state_dict(buf_state)
             env_probe.close()
 
@@ -340,7 +362,7 @@ def train(
             env = make_task_env(task_id, frame_stack)
             obs, _ = env.reset(seed=seed * 1_000_003 + episode)
             if buffer is None:
-                buffer = ReplayBuffer(obs, example["actions"].shape[-1], cfg.buffer_capacity or online_steps)
+                buffer = ReplayBuffer(obs, example["actions"].shape[-1], capacity)
             n_off = utd * int(round(int(agent_cfg.batch_size) * offline_ratio))
             ep_idx, ep_rew, ckpt_due = [], [], False
             while online_done < online_steps:
