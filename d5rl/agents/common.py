@@ -9,7 +9,6 @@ on CPU, not for CNNs) plus checkpoint (de)serialisation.
 from __future__ import annotations
 
 import functools
-from typing import Any
 
 import flax
 import flax.linen as nn

@@ -17,10 +17,9 @@ from __future__ import annotations
 from typing import Any
 
 import jax
-import jax.numpy as jnp
 
 from d5rl.agents.augment import augment_batch
-from d5rl.agents.common import (copy_tree, ENCODER_DEFAULTS, Agent, check_batch, make_train_state, nonpytree_field,
+from d5rl.agents.common import (copy_tree, ENCODER_DEFAULTS, Agent, make_train_state, nonpytree_field,
                                 obs_ndims, prepare_example, split_utd)
 from d5rl.agents.config import Config
 from d5rl.agents.networks import Critic, GaussianPolicy, Temperature, is_pixel_obs, make_encoder, soft_update

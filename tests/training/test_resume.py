@@ -6,8 +6,7 @@ import jax
 import numpy as np
 import pytest
 
-from d5rl.agents.config import ConfigError
-from d5rl.training.loop import NonFiniteLossError, load_run, train
+from d5rl.training.loop import train
 from d5rl.training.toy import toy_dataset
 
 SMALL = {"hidden_dims": "32,32", "batch_size": "32", "eval_episodes": "2", "eval_envs": "2",
