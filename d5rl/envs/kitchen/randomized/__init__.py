@@ -1,0 +1,1 @@
+"""Randomized Franka Kitchen (KitchenShift-style domain per reset); see :mod:`.domain` and :mod:`.task`."""

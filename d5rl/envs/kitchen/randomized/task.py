@@ -1,0 +1,81 @@
+"""The randomized Franka Kitchen: a new domain (see :mod:`.domain`) on every reset.
+
+Description
+    The standard kitchen's seven subtasks, rewards and success checks, in a scene whose microwave
+    model (4), kettle model (8), cabinet/counter/wall/floor colours, extra lights (1-3, direction and
+    colour) and side-camera poses (look-at/distance sigma 0.05, angles sigma 1 deg) are drawn from the
+    env's seeded generator at every reset.  ``info["domain"]`` / ``env.domain`` hold the parameters.
+
+Action space
+    As the standard kitchen: ``Box(-1, 1, (9,))`` joint velocities.
+
+Observation space
+    Dict: ``pixels/left``, ``pixels/right`` (side cameras), ``pixels/wrist``, uint8 (S, S, 3) with
+    S = 128 by default, and ``proprio`` (9 joint positions).  Stack 3 frames with
+    :class:`d5rl.envs.kitchen.wrappers.FrameStack`.
+
+Reward
+    As the standard kitchen (number of target subtasks in their goal configuration).
+
+Start state
+    Rest pose with +-0.05 rad uniform noise on the 7 arm joints.
+
+Episode end
+    Truncated after 500 steps.
+
+Version history
+    v0: first release (object position/yaw randomization not yet included).
+"""
+
+from __future__ import annotations
+
+from typing import Sequence
+
+import mujoco
+import numpy as np
+
+from d5rl.envs.kitchen.randomized.domain import Domain, apply_domain, compiled_variant
+from d5rl.envs.kitchen.subtasks import MIXED
+from d5rl.envs.kitchen.task import KitchenEnv
+
+MAX_EPISODE_STEPS = 500
+CAMERAS = ("left", "right", "wrist")
+
+
+class RandomizedKitchenEnv(KitchenEnv):
+    """Randomized kitchen (see the module docstring)."""
+
+    def __init__(self, tasks: Sequence[str] = MIXED, obs_mode: str = "pixels", image_size: int = 128,
+                 cameras: Sequence[str] = CAMERAS, init_noise: float = 0.05, render_mode: str | None = None,
+                 render_size: tuple[int, int] = (240, 320), domain: Domain | None = None):
+        first = domain or Domain.sample(np.random.default_rng(0))
+        model = compiled_variant(first.microwave, first.kettle, first.num_lights).__copy__()
+        super().__init__(tasks=tasks, obs_mode=obs_mode, image_size=image_size, cameras=cameras,
+                         init_noise=init_noise, render_mode=render_mode, render_size=render_size, model=model)
+        self._fixed_domain = domain
+        self.domain = first
+        apply_domain(self.model, first)
+
+    def set_domain(self, domain: Domain) -> None:
+        """Switch the scene to ``domain`` (recompiles only when a discrete choice changes; cached)."""
+        key = (domain.microwave, domain.kettle, domain.num_lights)
+        if key != (self.domain.microwave, self.domain.kettle, self.domain.num_lights):
+            for r in self._renderers.values():
+                r.close()
+            self._renderers.clear()
+            self.model = compiled_variant(*key).__copy__()
+            self.data = mujoco.MjData(self.model)
+        apply_domain(self.model, domain)
+        self.domain = domain
+
+    def reset(self, *, seed: int | None = None, options: dict | None = None):
+        if seed is not None:
+            super(KitchenEnv, self).reset(seed=seed)
+        domain = self._fixed_domain or Domain.sample(self.np_random)
+        if options and "domain" in options:
+            d = options["domain"]
+            domain = d if isinstance(d, Domain) else Domain.from_json(d)
+        self.set_domain(domain)
+        obs, info = super().reset(seed=None, options=options)
+        info["domain"] = domain.to_json()
+        return obs, info

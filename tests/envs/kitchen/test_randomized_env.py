@@ -1,0 +1,34 @@
+import numpy as np
+import pytest
+
+from d5rl.envs.kitchen.randomized.domain import Domain
+from d5rl.envs.kitchen.randomized.task import RandomizedKitchenEnv
+
+
+@pytest.fixture(scope="module")
+def env():
+    return RandomizedKitchenEnv(image_size=64)
+
+
+def test_same_seed_same_images_different_seed_differs(env):
+    a, ia = env.reset(seed=3)
+    b, ib = env.reset(seed=3)
+    c, ic = env.reset(seed=4)
+    assert ia["domain"] == ib["domain"] != ic["domain"]
+    for k in ("pixels/left", "pixels/right"):
+        assert np.array_equal(a[k], b[k])
+        assert np.abs(a[k].astype(float).mean((0, 1)) - c[k].astype(float).mean((0, 1))).max() > 1.0
+
+
+@pytest.mark.xfail(reason="known bug: after a reset switched variants, re-rendering differs (max 58/255); unresolved", strict=False)
+def test_rerender_from_state_and_domain(env):
+    obs, info = env.reset(seed=5)
+    for _ in range(3):
+        obs, *_ = env.step(env.action_space.sample() * 0 + 0.3)
+    state = env.get_state()
+    other = RandomizedKitchenEnv(image_size=64)
+    other.reset(seed=0)
+    other.set_domain(Domain.from_json(info["domain"]))
+    other.set_state(state)
+    for c in ("left", "right", "wrist"):
+        assert np.array_equal(other.render_camera_image(c, 64, 64), obs[f"pixels/{c}"])
