@@ -20,7 +20,6 @@ def test_same_seed_same_images_different_seed_differs(env):
         assert np.abs(a[k].astype(float).mean((0, 1)) - c[k].astype(float).mean((0, 1))).max() > 1.0
 
 
-@pytest.mark.xfail(reason="known bug: after a reset switched variants, re-rendering differs (max 58/255); unresolved", strict=False)
 def test_rerender_from_state_and_domain(env):
     obs, info = env.reset(seed=5)
     for _ in range(3):

@@ -53,6 +53,7 @@ class RandomizedKitchenEnv(KitchenEnv):
         super().__init__(tasks=tasks, obs_mode=obs_mode, image_size=image_size, cameras=cameras,
                          init_noise=init_noise, render_mode=render_mode, render_size=render_size, model=model)
         self._fixed_domain = domain
+        self._variants: dict[tuple, tuple] = {}
         self.domain = first
         apply_domain(self.model, first)
 
@@ -60,13 +61,24 @@ class RandomizedKitchenEnv(KitchenEnv):
         """Switch the scene to ``domain`` (recompiles only when a discrete choice changes; cached)."""
         key = (domain.microwave, domain.kettle, domain.num_lights)
         if key != (self.domain.microwave, self.domain.kettle, self.domain.num_lights):
-            for r in self._renderers.values():
-                r.close()
-            self._renderers.clear()
-            self.model = compiled_variant(*key).__copy__()
-            self.data = mujoco.MjData(self.model)
+            # Renderers are kept per variant: closing an EGL renderer and opening another one
+            # rendered wrong images (measured), and reusing them also saves the GL upload.
+            old = (self.domain.microwave, self.domain.kettle, self.domain.num_lights)
+            self._variants[old] = (self.model, self.data, self._renderers)
+            if key in self._variants:
+                self.model, self.data, self._renderers = self._variants.pop(key)
+            else:
+                self.model = compiled_variant(*key).__copy__()
+                self.data = mujoco.MjData(self.model)
+                self._renderers = {}
         apply_domain(self.model, domain)
         self.domain = domain
+
+    def do_simulation(self, ctrl=None, n_steps=None) -> None:
+        # mj_step leaves positions-dependent quantities (xpos, camera poses) one substep stale;
+        # recompute them so observations equal renders of the stored state exactly.
+        super().do_simulation(ctrl, n_steps)
+        mujoco.mj_forward(self.model, self.data)
 
     def reset(self, *, seed: int | None = None, options: dict | None = None):
         if seed is not None:
