@@ -36,3 +36,5 @@ for name, tasks, desc in (
             tags=("kitchen", "pixels"),
         )
     )
+
+import d5rl.envs.kitchen.randomized.registration  # noqa: E402,F401  (randomized kitchen ids)

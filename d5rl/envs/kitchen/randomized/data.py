@@ -1,0 +1,166 @@
+"""Randomized-kitchen datasets: emulated human teleoperation by operators with skill parameters.
+
+Each episode draws a domain (the env's reset), an operator and a subtask list, then runs the
+standard kitchen's scripted :class:`~d5rl.envs.kitchen.demonstrator.Demonstrator` with the
+operator's habits for 500 steps (after the last subtask the operator holds still, with noise).
+
+- ``demos``: one skilled operator, the ``mixed`` task's four subtasks in a random order.
+- ``play``: operators of several skill levels, 2-6 random subtasks in random order; no episode
+  contains all four ``partial`` subtasks.
+- ``suboptimal``: unskilled operators on the ``mixed`` subtasks in random order.
+
+Operators (:class:`Operator`): ``speed`` (phase speed), ``noise`` (smoothed action noise std),
+``hesitation`` (chance of a short pause before each phase), ``detour`` (chance of a detour via a
+random point) and ``give_up`` (chance of abandoning a subtask attempt -- emulating a failed grasp
+that is not retried).  Stored per episode (meta): ``domain`` (re-render exactly with
+:func:`render_episode`), ``operator``, ``subtasks``, ``solved``.
+"""
+
+from __future__ import annotations
+
+import dataclasses
+from typing import Sequence
+
+import numpy as np
+
+from d5rl.datasets.episode import Episode
+from d5rl.envs.kitchen.subtasks import MIXED, PARTIAL, SUBTASK_NAMES
+
+MAX_STEPS = 500
+DEFAULT_CAMERAS = ("left", "right", "wrist")
+
+
+@dataclasses.dataclass(frozen=True)
+class Operator:
+    name: str
+    speed: tuple[float, float]
+    noise: tuple[float, float]
+    hesitation: tuple[float, float]
+    detour: tuple[float, float]
+    give_up: float
+
+    def style(self, rng: np.random.Generator):
+        from d5rl.envs.kitchen.demonstrator import Style
+
+        return Style(speed=float(rng.uniform(*self.speed)), noise=float(rng.uniform(*self.noise)),
+                     pause_prob=float(rng.uniform(*self.hesitation)), via_prob=float(rng.uniform(*self.detour)))
+
+
+SKILLED = Operator("skilled", speed=(1.0, 1.2), noise=(0.01, 0.03), hesitation=(0.0, 0.05), detour=(0.0, 0.1), give_up=0.0)
+AVERAGE = Operator("average", speed=(0.8, 1.1), noise=(0.03, 0.08), hesitation=(0.05, 0.2), detour=(0.1, 0.3), give_up=0.08)
+NOVICE = Operator("novice", speed=(0.6, 0.9), noise=(0.08, 0.15), hesitation=(0.15, 0.35), detour=(0.3, 0.6), give_up=0.12)
+OPERATORS = {o.name: o for o in (SKILLED, AVERAGE, NOVICE)}
+MIXED_ORDER = tuple(MIXED)
+MODES = {"demos": (SKILLED,), "play": (SKILLED, AVERAGE, NOVICE), "suboptimal": (AVERAGE, NOVICE)}
+
+
+def play_subtasks(rng: np.random.Generator) -> list[str]:
+    while True:
+        n = int(rng.integers(2, 7))
+        chosen = [SUBTASK_NAMES[i] for i in rng.permutation(len(SUBTASK_NAMES))[:n]]
+        if not set(PARTIAL) <= set(chosen):
+            return chosen
+
+
+class RandomizedKitchenGenerator:
+    """Episode generator; ``mode`` is ``demos``, ``play`` or ``suboptimal``."""
+
+    version = "kitchen-randomized-1"
+
+    def __init__(self, task_id: str | None = None, mode: str = "demos", max_steps: int = MAX_STEPS):
+        from d5rl.envs.kitchen.randomized.task import RandomizedKitchenEnv
+        from d5rl.errors import D5RLError
+
+        if mode not in MODES:
+            raise D5RLError(f"unknown randomized-kitchen dataset mode {mode!r}", f"use one of {list(MODES)}")
+        self.mode = mode
+        self.env = RandomizedKitchenEnv(obs_mode="state")
+        self.max_steps = int(max_steps)
+
+    def episode(self, index: int, rng: np.random.Generator) -> Episode:
+        ops = MODES[self.mode]
+        op = ops[int(rng.integers(len(ops)))]
+        subtasks = play_subtasks(rng) if self.mode == "play" else [MIXED[i] for i in rng.permutation(len(MIXED))]
+        return self.demonstrate(subtasks, op, rng)
+
+    def demonstrate(self, subtasks: Sequence[str], op: Operator, rng: np.random.Generator) -> Episode:
+        from d5rl.envs.kitchen.demonstrator import Demonstrator
+
+        env = self.env
+        _, info0 = env.reset(seed=int(rng.integers(2**31)))
+        attempted = [s for s in subtasks if rng.random() >= op.give_up]
+        # an abandoned subtask is still approached for a while (a failed attempt), then dropped
+        policy = Demonstrator(env, attempted, rng, style=op.style(rng))
+        cols = np.array([SUBTASK_NAMES.index(s) for s in subtasks])
+        states, proprio, actions, completed = [env.get_state()], [env.data.qpos[:9].astype(np.float32)], [], []
+        hold_noise = np.zeros(9)
+        for _ in range(self.max_steps):
+            action = policy.act()
+            if policy.finished:
+                hold_noise = 0.8 * hold_noise + 0.2 * rng.normal(0.0, policy.style.noise, 9)
+                action = np.clip(action + hold_noise, -1, 1).astype(np.float32)
+            env.step(action)
+            actions.append(action)
+            states.append(env.get_state())
+            proprio.append(env.data.qpos[:9].astype(np.float32))
+            completed.append(env.completed())
+        t = len(actions)
+        comp = np.asarray(completed, dtype=bool).reshape(t, len(SUBTASK_NAMES))
+        timeouts = np.zeros(t, dtype=bool)
+        timeouts[-1] = True
+        solved_any = comp.any(axis=0)
+        arrays = {
+            "observations/proprio": np.asarray(proprio, dtype=np.float32),
+            "actions": np.asarray(actions, dtype=np.float32).reshape(t, 9),
+            "rewards": comp[:, cols].sum(axis=1).astype(np.float32),
+            "terminals": np.zeros(t, dtype=bool),
+            "timeouts": timeouts,
+            "states": np.asarray(states, dtype=np.float64),
+            "infos/completed": comp,
+        }
+        meta = {
+            "domain": info0["domain"],
+            "operator": op.name,
+            "style": dataclasses.asdict(policy.style),
+            "subtasks": list(subtasks),
+            "attempted": attempted,
+            "solved": [s for s in SUBTASK_NAMES if solved_any[SUBTASK_NAMES.index(s)]],
+            "num_solved": int(solved_any.sum()),
+        }
+        return Episode(arrays, meta)
+
+
+# --- rendering stored states with their domains -------------------------------------------------
+_RENDER_ENV = {}
+
+
+def render_episode(arrays: dict, meta: dict, cameras: Sequence[str] = DEFAULT_CAMERAS, size: int = 128) -> dict:
+    """``observations/pixels/<camera>`` of a stored episode, in its stored domain."""
+    from d5rl.envs.kitchen.randomized.domain import Domain
+    from d5rl.envs.kitchen.randomized.task import RandomizedKitchenEnv
+
+    size = int(size)
+    if size not in _RENDER_ENV:
+        _RENDER_ENV[size] = RandomizedKitchenEnv(image_size=size)
+    env = _RENDER_ENV[size]
+    env.set_domain(Domain.from_json(meta["domain"]))
+    states = np.asarray(arrays["states"], dtype=np.float64)
+    out = {c: np.empty((len(states), size, size, 3), np.uint8) for c in cameras}
+    for i, s in enumerate(states):
+        env.set_state(s)
+        for c in cameras:
+            out[c][i] = env.render_camera_image(c, size, size)
+    return {f"observations/pixels/{c}": v for c, v in out.items()}
+
+
+def renders(spec, root, manifest, *, episodes: int, workers: int | None = None, progress: bool = True,
+            cameras: Sequence[str] = DEFAULT_CAMERAS, size: int = 128, render: bool = True) -> list:
+    """``DatasetSpec.derived``: camera frames of the stored states in their domains (cached)."""
+    if not render:
+        return []
+    from d5rl.datasets.render_cache import ensure_render_cache
+
+    return [ensure_render_cache(root, manifest, "d5rl.envs.kitchen.randomized.data:render_episode",
+                                {"cameras": tuple(cameras), "size": int(size)},
+                                name=f"{'+'.join(cameras)}-{int(size)}x{int(size)}", episodes=episodes,
+                                workers=workers, progress=progress)]
