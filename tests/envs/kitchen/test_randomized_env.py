@@ -31,3 +31,14 @@ def test_rerender_from_state_and_domain(env):
     other.set_state(state)
     for c in ("left", "right", "wrist"):
         assert np.array_equal(other.render_camera_image(c, 64, 64), obs[f"pixels/{c}"])
+
+
+def test_env_checker_and_registration():
+    from gymnasium.utils.env_checker import check_env
+
+    from d5rl.registry import make_env
+
+    env = make_env("kitchen-randomized-mixed-v0", image_size=32)
+    check_env(env.unwrapped, skip_render_check=True)
+    obs, info = env.reset(seed=0)
+    assert set(obs) == {"pixels/left", "pixels/right", "pixels/wrist", "proprio"} and "domain" in info
