@@ -4,8 +4,8 @@ A :class:`Domain` holds discrete choices (microwave model, kettle model, light c
 model's structure -- compiled once per choice and cached per process -- and continuous parameters
 (texture colours, light directions/colours, camera jitter) written into the compiled model.
 Microwave and kettle variants add *visual* shells/handles (no mass, no contacts), so the physics and
-subtask checks stay those of the standard kitchen.  Object position/yaw randomization is not done
-yet (the scripted demonstrator assumes the standard object poses).
+subtask checks stay those of the standard kitchen.  The kettle's start position gets +-3 cm noise;
+microwave position/yaw randomization is not done yet.
 """
 
 from __future__ import annotations
@@ -21,6 +21,7 @@ from d5rl.envs.kitchen import model as km
 NUM_MICROWAVES = 4
 NUM_KETTLES = 8
 MAX_EXTRA_LIGHTS = 3
+KETTLE_NOISE = 0.03  # m, uniform kettle start-position noise in x and y
 CAMERA_NAMES = ("left", "right")
 # Side cameras (two views from the robot's left and right), jittered per episode.
 SIDE_CAMERAS = {
@@ -37,6 +38,7 @@ class Domain:
     colors: tuple  # rgba per recoloured material group
     lights: tuple  # (dir xyz, diffuse rgb) per extra light
     camera: tuple  # per side camera: (d lookat xyz, d distance, d azimuth deg, d elevation deg)
+    kettle_offset: tuple = (0.0, 0.0)  # (dx, dy) m of the kettle's start position on its burner
 
     @classmethod
     def sample(cls, rng: np.random.Generator) -> "Domain":
@@ -53,7 +55,8 @@ class Domain:
              float(rng.normal(0, 1.0)), float(rng.normal(0, 1.0)))
             for _ in CAMERA_NAMES
         )
-        return cls(mw, kt, nl, colors, tuple(lights), camera)
+        offset = tuple(float(x) for x in rng.uniform(-KETTLE_NOISE, KETTLE_NOISE, 2))
+        return cls(mw, kt, nl, colors, tuple(lights), camera, offset)
 
     def to_json(self) -> dict:
         return dataclasses.asdict(self)

@@ -18,7 +18,7 @@ Reward
     As the standard kitchen (number of target subtasks in their goal configuration).
 
 Start state
-    Rest pose with +-0.05 rad uniform noise on the 7 arm joints.
+    Rest pose with +-0.05 rad uniform noise on the 7 arm joints; kettle shifted +-3 cm in x and y.
 
 Episode end
     Truncated after 500 steps.
@@ -88,6 +88,12 @@ class RandomizedKitchenEnv(KitchenEnv):
             d = options["domain"]
             domain = d if isinstance(d, Domain) else Domain.from_json(d)
         self.set_domain(domain)
-        obs, info = super().reset(seed=None, options=options)
+        super().reset(seed=None, options=options)
+        adr = int(self.model.jnt_qposadr[self.model.joint("kettle").id])  # free joint: x, y, z, quat
+        self.data.qpos[adr : adr + 2] += domain.kettle_offset
+        mujoco.mj_forward(self.model, self.data)
+        completed = self.completed()
+        self._solved = completed[self._task_cols].copy()
+        obs, info = self._get_obs(), self._info(completed)
         info["domain"] = domain.to_json()
         return obs, info
