@@ -27,7 +27,6 @@ def main():
 
     std = KitchenEnv(obs_mode="state")
     rnd = RandomizedKitchenEnv(obs_mode="state")
-    t = time.perf_counter()
     rnd_cold = rate(lambda i: rnd.reset(seed=i), a.resets)  # includes compiling new variants
     rnd_warm = rate(lambda i: rnd.reset(seed=i), a.resets)  # same seeds: variants cached
     std_r = rate(lambda i: std.reset(seed=i), a.resets)

@@ -14,7 +14,6 @@ import time
 
 import d5rl  # noqa: F401  (sets MUJOCO_GL)
 import mujoco
-import numpy as np
 
 from d5rl.envs.kitchen import model as km
 from d5rl.rendering import make_renderer

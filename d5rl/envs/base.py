@@ -54,6 +54,10 @@ class MujocoEnv(gym.Env):
         if ctrl is not None:
             self.data.ctrl[:] = ctrl
         mujoco.mj_step(self.model, self.data, nstep=self.frame_skip if n_steps is None else n_steps)
+        # mj_step leaves position-dependent quantities (xpos, site and camera poses) one substep
+        # behind qpos; recompute them so rewards, observations and renders agree with the stored
+        # state (replaying a state with set_state gives exactly these values).
+        mujoco.mj_forward(self.model, self.data)
 
     @property
     def state_size(self) -> int:

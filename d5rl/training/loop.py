@@ -314,7 +314,7 @@ def train(
     t_window, n_window = time.perf_counter(), 0
 
     def record(metrics, n_updates: int):
-        nonlocal acc, acc_n, n_window
+        nonlocal acc_n, n_window
         host = {k: float(v) for k, v in jax.device_get(metrics).items()}
         _check_finite(host, step)
         for k, v in host.items():

@@ -63,8 +63,6 @@ class KitchenStandardGenerator:
         self.max_steps = int(max_steps)
 
     def episode(self, index: int, rng: np.random.Generator) -> Episode:
-        from d5rl.envs.kitchen.demonstrator import Demonstrator
-
         combo_index = index % len(COMBINATIONS)
         return self.demonstrate(COMBINATIONS[combo_index], rng, meta={"combination": combo_index})
 

@@ -138,8 +138,6 @@ class WidowXSortingEnv(MujocoEnv):
         pose[3] += a[3] * self.max_yaw_delta
         self._set_targets(pose, a[4])
         self.do_simulation()
-        # positions of bodies after the last physics step (reward, camera) -- as a stored state gives them
-        mujoco.mj_forward(self.model, self.data)
         return self._step_result()
 
     def _step_result(self):
@@ -189,7 +187,6 @@ class WidowXSortingEnv(MujocoEnv):
         self.data.qpos[self.index.finger_qpos] = [wm.FINGER_OPEN, -wm.FINGER_OPEN]
         self._set_targets(home, -1.0)
         self.do_simulation(n_steps=SETTLE_STEPS)
-        mujoco.mj_forward(self.model, self.data)
         count, where = sorted_count(self.model, self.data, self.domain)
         return self._obs(), self._info(count, where)
 

@@ -6,7 +6,6 @@ import subprocess
 import sys
 from pathlib import Path
 
-import gymnasium as gym
 import mujoco
 import numpy as np
 import pytest

@@ -74,12 +74,6 @@ class RandomizedKitchenEnv(KitchenEnv):
         apply_domain(self.model, domain)
         self.domain = domain
 
-    def do_simulation(self, ctrl=None, n_steps=None) -> None:
-        # mj_step leaves positions-dependent quantities (xpos, camera poses) one substep stale;
-        # recompute them so observations equal renders of the stored state exactly.
-        super().do_simulation(ctrl, n_steps)
-        mujoco.mj_forward(self.model, self.data)
-
     def reset(self, *, seed: int | None = None, options: dict | None = None):
         if seed is not None:
             super(KitchenEnv, self).reset(seed=seed)
