@@ -77,12 +77,17 @@ def load_task_dataset(task_id: str, **kwargs):
     return load_dataset(task_id, **kwargs)
 
 
-def normalizer(task_id: str):
-    """raw return → normalized score (None when the task has no reference scores)."""
-    if task_id in toy.TOY_TASKS:
-        return toy.toy_normalize_score
-    from d5rl.registry import get_spec, normalize_score
+def episode_scorer(task_id: str):
+    """``(episode_return, final_info) -> normalized score``, or None when the task has no score.
 
-    if get_spec(task_id).score is None:
+    Tasks score either from the return (A1: random = 0, expert = 1) or from the last
+    step's ``info["score"]`` (kitchen, WidowX); :func:`d5rl.episode_score` knows which.
+    """
+    if task_id in toy.TOY_TASKS:
+        return lambda ret, info: float(toy.toy_normalize_score(ret))
+    from d5rl.registry import episode_score, get_spec
+
+    spec = get_spec(task_id)
+    if spec.score_from == "return" and spec.score is None:
         return None
-    return functools.partial(normalize_score, task_id)
+    return functools.partial(episode_score, task_id)

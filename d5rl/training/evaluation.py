@@ -9,7 +9,7 @@ import gymnasium as gym
 import jax
 import numpy as np
 
-from d5rl.training.envs import env_factory, normalizer
+from d5rl.training.envs import env_factory, episode_scorer
 
 
 def _stack_obs(obs_list):
@@ -44,6 +44,7 @@ def evaluate(
     envs = [fn() for fn in fns] if not processes else None
     vec = gym.vector.AsyncVectorEnv(fns, copy=True, context="spawn") if processes else None
     returns, lengths, successes, frames = [], [], [], []
+    final_infos: list[dict] = []
     key = jax.random.PRNGKey(seed)
     ep = 0
     try:
@@ -57,6 +58,7 @@ def evaluate(
                 obs = [envs[i].reset(seed=s)[0] for i, s in enumerate(seeds)]
             done = np.zeros(n, bool)
             ret, length, succ = np.zeros(n), np.zeros(n, int), np.zeros(n, bool)
+            last: list[dict] = [{} for _ in range(n)]
             if render and ep == 0:
                 frames.append(_render(envs, vec, processes))
             while not done.all():
@@ -75,6 +77,8 @@ def evaluate(
                         s = info.get("success")
                         succ[j] |= bool(s[j]) if s is not None else False
                         done[j] = term[j] or trunc[j]
+                        if done[j] and "score" in info:
+                            last[j] = {"score": float(info["score"][j])}
                 else:
                     for a, j in zip(actions, live):
                         obs[j], r, term, trunc, info = envs[j].step(a)
@@ -82,11 +86,14 @@ def evaluate(
                         length[j] += 1
                         succ[j] |= bool(info.get("success", False))
                         done[j] = term or trunc
+                        if done[j]:
+                            last[j] = info
                 if render and ep == 0 and not done[0]:
                     frames.append(_render(envs, vec, processes))
             returns += list(ret)
             lengths += list(length)
             successes += list(succ)
+            final_infos += last
             ep += n
     finally:
         if vec is not None:
@@ -96,9 +103,9 @@ def evaluate(
     out = {"return": float(np.mean(returns)), "return_std": float(np.std(returns)),
            "length": float(np.mean(lengths)), "success": float(np.mean(successes)),
            "episodes": len(returns), "returns": [float(x) for x in returns]}
-    norm = normalizer(task_id) if env_fn is None else None
-    if norm is not None:
-        scores = np.asarray(norm(np.asarray(returns)), np.float64)
+    scorer = episode_scorer(task_id) if env_fn is None else None
+    if scorer is not None:
+        scores = np.asarray([scorer(r, info) for r, info in zip(returns, final_infos)], np.float64)
         out["score"] = float(scores.mean())
         out["score_std"] = float(scores.std())
     if render and frames:

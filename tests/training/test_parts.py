@@ -84,3 +84,23 @@ def test_task_overrides_table():
     assert pix == {"batch_size": 64, "actor_lr": 1e-4, "temperature": 0.5, "expectile": 0.7}
     td3_cfg = get_agent("td3bc")[1]()
     assert task_overrides("kitchen-standard-mixed-v0", "td3bc", True, td3_cfg) == {"batch_size": 64, "actor_lr": 1e-4}
+
+
+def test_evaluation_scores_info_scored_tasks_from_the_last_info():
+    """Kitchen and WidowX score from info['score'] at the episode's end, not from the return."""
+    import d5rl
+    from d5rl.training.evaluation import evaluate
+
+    class Still:
+        def eval_actions(self, obs, seed=None):
+            return np.zeros((len(obs["proprio"]), 5), np.float32)
+
+    out = evaluate(Still(), "wx-sorting-v0", 1, seed=5)
+    env = d5rl.make_env("wx-sorting-v0")
+    env.reset(seed=5)
+    total, done = 0.0, False
+    while not done:
+        _, r, term, trunc, info = env.step(np.zeros(5, np.float32))
+        total, done = total + r, term or trunc
+    assert out["returns"] == [total]
+    assert out["score"] == d5rl.episode_score("wx-sorting-v0", total, info) == info["score"]

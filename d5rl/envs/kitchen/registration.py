@@ -32,6 +32,7 @@ for name, tasks, desc in (
             dataset=STANDARD_DATASET,
             relabel="d5rl.envs.kitchen.data:relabel",
             score=None,
+            score_from="info",
             score_definition=SCORE,
             tags=("kitchen", "pixels"),
         )

@@ -38,6 +38,7 @@ for task_name, dataset_mode, tasks, n, desc in (
             dataset=_dataset(dataset_mode, n, desc),
             relabel="d5rl.envs.kitchen.data:relabel",
             score=None,
+            score_from="info",
             score_definition=SCORE,
             tags=("kitchen", "pixels", "randomized"),
         )
