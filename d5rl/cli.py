@@ -102,7 +102,10 @@ def cmd_info(args) -> int:
 def cmd_generate(args) -> int:
     from d5rl.datasets.generation import generate
 
-    root = generate(args.task, seed=args.seed, num_episodes=args.episodes, workers=args.workers, force=args.force)
+    from d5rl.parallel import Ray
+
+    workers = Ray(args.ray) if args.ray else args.workers
+    root = generate(args.task, seed=args.seed, num_episodes=args.episodes, workers=workers, force=args.force)
     print(f"dataset ready: {root}")
     return 0
 
@@ -196,6 +199,9 @@ def build_parser() -> argparse.ArgumentParser:
     q.add_argument("--episodes", type=int, help="generate only the first N episodes (a prefix of the full set)")
     q.add_argument("--seed", type=int, help="dataset seed (default: the task's)")
     q.add_argument("--workers", type=int, help="processes (default: all cores)")
+    q.add_argument("--ray", metavar="ADDRESS",
+                   help="run the shards on a Ray cluster instead ('auto', 'ray://HOST:10001', or 'local'); "
+                        "$D5RL_HOME must be on a filesystem every node sees")
     q.add_argument("--force", action="store_true", help="delete what is on disk and start over")
     q.set_defaults(func=cmd_generate)
 

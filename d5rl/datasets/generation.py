@@ -12,18 +12,14 @@ more episodes later extends it.
 
 from __future__ import annotations
 
-import multiprocessing as mp
-import os
-import queue as queue_mod
 import shutil
 import time
-from concurrent.futures import FIRST_COMPLETED, ProcessPoolExecutor, wait
 from pathlib import Path
 
 import numpy as np
 from tqdm.auto import tqdm
 
-from d5rl import paths
+from d5rl import parallel, paths
 from d5rl.datasets import format as fmt
 from d5rl.datasets.episode import Episode
 from d5rl.errors import D5RLError, DatasetVersionError
@@ -74,11 +70,7 @@ def _json_normal(obj):
 _WORKER: dict = {}
 
 
-def _init_worker(spec: TaskSpec, single_thread: bool) -> None:
-    if single_thread:  # one process per core: keep numerical libraries from oversubscribing
-        for var in ("OMP_NUM_THREADS", "MKL_NUM_THREADS", "OPENBLAS_NUM_THREADS"):
-            os.environ[var] = "1"
-        os.environ.setdefault("XLA_FLAGS", "--xla_cpu_multi_thread_eigen=false intra_op_parallelism_threads=1")
+def _init_worker(spec: TaskSpec) -> None:
     _WORKER.clear()
     _WORKER["generator"] = make_generator(spec)
 
@@ -110,7 +102,7 @@ def _concat(episodes: list[Episode]) -> tuple[dict[str, np.ndarray], dict[str, s
     return arrays, aligns
 
 
-def _run_shard(root: str, index: int, start: int, stop: int, ident: dict, progress_queue) -> dict:
+def _run_shard(root: str, index: int, start: int, stop: int, ident: dict) -> dict:
     gen = _WORKER["generator"]
     episodes = []
     for i in range(start, stop):
@@ -119,8 +111,7 @@ def _run_shard(root: str, index: int, start: int, stop: int, ident: dict, progre
         if ep.num_transitions < 1:
             raise ValueError(f"episode {i} has no transitions")
         episodes.append(ep)
-        if progress_queue is not None:
-            progress_queue.put(ep.num_transitions)
+        parallel.report(ep.num_transitions)
     arrays, aligns = _concat(episodes)
     writer = fmt.ShardWriter(Path(root), index)
     try:
@@ -154,7 +145,7 @@ def generate(
     *,
     seed: int | None = None,
     num_episodes: int | None = None,
-    workers: int | None = None,
+    workers: parallel.Workers = None,
     force: bool = False,
     progress: bool = True,
 ) -> Path:
@@ -210,63 +201,27 @@ def generate(
         disable=not progress, dynamic_ncols=True,
     )
     t0, transitions = time.perf_counter(), 0
+
+    def on_message(n_transitions: int) -> None:
+        nonlocal transitions
+        transitions += n_transitions
+        bar.update(1)
+        bar.set_postfix(steps_per_s=f"{transitions / max(time.perf_counter() - t0, 1e-9):.0f}", refresh=False)
+
+    def on_result(i: int, record: dict) -> None:
+        records[pending[i][0]] = record
+
     try:
-        if pending:
-            n_workers = max(1, min(workers or os.cpu_count() or 1, len(pending)))
-            if n_workers == 1:
-                _init_worker(spec, single_thread=False)
-                for index, start, stop in pending:
-                    q = _ListQueue()
-                    records[index] = _run_shard(str(shards_dir), index, start, stop, ident, q)
-                    transitions += sum(q.items)
-                    bar.update(stop - start)
-                    bar.set_postfix(steps_per_s=f"{transitions / (time.perf_counter() - t0):.0f}")
-            else:
-                transitions = _run_pool(spec, n_workers, pending, shards_dir, ident, records, bar, t0)
+        parallel.run_jobs(
+            _run_shard, [(str(shards_dir), index, start, stop, ident) for index, start, stop in pending],
+            workers=workers, initializer=_init_worker, initargs=(spec,),
+            on_message=on_message, on_result=on_result, shared_dir=shards_dir,
+        )
     finally:
         bar.close()
 
     write_manifest(root, dspec, ident, [records[i] for i in range(len(plan))], num_episodes)
     return root
-
-
-class _ListQueue:
-    def __init__(self):
-        self.items = []
-
-    def put(self, x):
-        self.items.append(x)
-
-
-def _run_pool(spec, n_workers, pending, shards_dir, ident, records, bar, t0) -> int:
-    ctx = mp.get_context("spawn")  # fork is unsafe with JAX/OpenGL state in the parent
-    transitions = 0
-    with ctx.Manager() as manager:
-        q = manager.Queue()
-        with ProcessPoolExecutor(n_workers, mp_context=ctx, initializer=_init_worker,
-                                 initargs=(spec, True)) as pool:
-            futures = {
-                pool.submit(_run_shard, str(shards_dir), index, start, stop, ident, q): index
-                for index, start, stop in pending
-            }
-            remaining = set(futures)
-            try:
-                while remaining:
-                    finished, remaining = wait(remaining, timeout=0.5, return_when=FIRST_COMPLETED)
-                    while True:
-                        try:
-                            transitions += q.get_nowait()
-                            bar.update(1)
-                        except queue_mod.Empty:
-                            break
-                    bar.set_postfix(steps_per_s=f"{transitions / max(time.perf_counter() - t0, 1e-9):.0f}")
-                    for fut in finished:
-                        records[futures[fut]] = fut.result()
-            except BaseException:
-                for fut in remaining:
-                    fut.cancel()
-                raise
-    return transitions
 
 
 def write_manifest(root: Path, dspec: DatasetSpec, ident: dict, records: list[dict], num_episodes: int) -> dict:

@@ -20,13 +20,12 @@ A family plugs in with ``DatasetSpec.derived`` pointing at a small function that
 
 from __future__ import annotations
 
-import multiprocessing as mp
-import os
 from pathlib import Path
 from typing import Any
 
 import numpy as np
 
+from d5rl import parallel
 from d5rl.datasets import format as fmt
 from d5rl.registry import resolve
 
@@ -41,7 +40,7 @@ def _shard_is_current(shard_dir: Path, source_sha: str, fn: str, kwargs: dict) -
     return rec.get("source_states_sha256") == source_sha and rec.get("render") == {"fn": fn, "kwargs": kwargs}
 
 
-def render_shard(dataset_shard: str, out_root: str, index: int, fn: str, kwargs: dict, progress_queue=None) -> dict:
+def render_shard(dataset_shard: str, out_root: str, index: int, fn: str, kwargs: dict) -> dict:
     """Render every episode of one dataset shard into ``out_root/shard-XXXXX`` (atomic)."""
     src = Path(dataset_shard)
     rec = fmt.read_shard_record(src)
@@ -63,8 +62,7 @@ def render_shard(dataset_shard: str, out_root: str, index: int, fn: str, kwargs:
                     outs[key] = writer.open(key, (total,) + arr.shape[1:], arr.dtype)
                 outs[key][row : row + ep_len + 1] = arr
             row += ep_len + 1
-            if progress_queue is not None:
-                progress_queue.put(1)
+            parallel.report(1)
         for m in outs.values():
             m.flush()
         del outs
@@ -82,22 +80,9 @@ def render_shard(dataset_shard: str, out_root: str, index: int, fn: str, kwargs:
         raise
 
 
-def _worker(job):
-    dataset_shard, out_root, index, fn, kwargs = job
-    os.environ.setdefault("MUJOCO_GL", "egl")
-    return render_shard(dataset_shard, out_root, index, fn, kwargs, _QUEUE)
-
-
-_QUEUE = None
-
-
-def _init(queue):
-    global _QUEUE
-    _QUEUE = queue
-
-
 def ensure_render_cache(root: str | Path, manifest: dict, fn: str, kwargs: dict[str, Any], *, name: str,
-                        episodes: int | None = None, workers: int | None = None, progress: bool = True) -> Path:
+                        episodes: int | None = None, workers: parallel.Workers = None,
+                        progress: bool = True) -> Path:
     """Make sure ``root/renders/<name>`` holds up-to-date frames for the dataset's first ``episodes``
     episodes (whole shards); render what is missing.  Returns the cache directory."""
     root = Path(root)
@@ -118,33 +103,14 @@ def ensure_render_cache(root: str | Path, manifest: dict, fn: str, kwargs: dict[
         todo_eps += entry["episodes"][1] - entry["episodes"][0]
     if not jobs:
         return out
-    workers = max(1, min(len(jobs), workers or os.cpu_count() or 1))
     bar = None
     if progress:
         from tqdm import tqdm
 
         bar = tqdm(total=todo_eps, desc=f"rendering {name}", unit="ep")
     try:
-        if workers == 1:
-            class _Q:
-                def put(self, k):
-                    if bar is not None:
-                        bar.update(k)
-
-            for job in jobs:
-                render_shard(*job, progress_queue=_Q())
-        else:
-            ctx = mp.get_context("spawn")
-            queue = ctx.Manager().Queue()
-            with ctx.Pool(workers, initializer=_init, initargs=(queue,)) as pool:
-                result = pool.map_async(_worker, jobs)
-                while not result.ready():
-                    result.wait(0.2)
-                    while not queue.empty():
-                        k = queue.get()
-                        if bar is not None:
-                            bar.update(k)
-                result.get()
+        parallel.run_jobs(render_shard, jobs, workers=workers, on_message=bar.update if bar is not None else None,
+                          shared_dir=out)
     finally:
         if bar is not None:
             bar.close()

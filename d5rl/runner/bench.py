@@ -21,7 +21,8 @@ import time
 from pathlib import Path
 from typing import Iterable
 
-from d5rl.errors import D5RLError, MissingDependencyError
+from d5rl.errors import D5RLError
+from d5rl.parallel import connect_ray
 from d5rl.runner.execute import (EXIT_CODES, LOG_FILE, atomic_write_text, clear_job_outputs, configure_worker,
                                  execute_cell, is_done, read_failures, record_failure, write_cell_file)
 from d5rl.runner.grid import DEFAULT_JOB, Cell, GridError, read_cell
@@ -272,29 +273,9 @@ def _ray_task(cell_json: dict, cell_dir: str, attempt: int, single_thread: bool,
     return execute_cell(cell_json, cell_dir, attempt)
 
 
-def import_ray():
-    try:
-        import ray
-    except ImportError as e:
-        raise MissingDependencyError(
-            "the Ray backend needs the `ray` package",
-            "pip install 'ray>=2.9' (or run without --ray to use the local process pool)",
-        ) from e
-    return ray
-
-
 def _run_ray(pending: list[Cell], run_dir: Path, result: BenchResult, bar, address: str | None,
              max_attempts: int, single_thread: bool, nice: int, cpus: float, gpus: float) -> None:
-    ray = import_ray()
-    if not ray.is_initialized():
-        try:
-            if address == "local":  # start a private Ray instance on this machine
-                ray.init(log_to_driver=False, include_dashboard=False)
-            else:
-                ray.init(address=address or "auto", log_to_driver=False)
-        except ConnectionError as e:
-            raise D5RLError(f"cannot reach a Ray cluster at {address or 'auto'} ({e})",
-                            "start one with `ray start --head` or pass --ray ADDRESS of a running head node") from e
+    ray = connect_ray(address)
     # max_calls=1: a fresh worker process per cell (clean JAX state, freed memory), like the local pool;
     # retries are ours (recorded in the cell directory), so Ray's are off.
     remote = ray.remote(num_cpus=cpus, num_gpus=gpus, max_calls=1, max_retries=0)(_ray_task)

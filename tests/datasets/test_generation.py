@@ -38,6 +38,35 @@ def test_same_seed_same_bytes_any_worker_count(tmp_path, monkeypatch):
     assert c["manifest.json"] != a["manifest.json"]
 
 
+def test_ray_backend_writes_the_same_bytes(tmp_path, monkeypatch):
+    pytest.importorskip("ray")
+    from d5rl.parallel import Ray
+
+    spec = register_toy("ray", num_episodes=7, per_shard=2)
+    monkeypatch.setenv("D5RL_HOME", str(tmp_path / "a"))
+    a = tree_digest(generate(spec, workers=1, progress=False))
+    monkeypatch.setenv("D5RL_HOME", str(tmp_path / "b"))
+    b = tree_digest(generate(spec, workers=Ray("local"), progress=False))
+    assert a == b  # nothing left behind either (the shared-directory check file is removed)
+
+
+def test_run_jobs_reports_progress_and_keeps_job_order():
+    from d5rl import parallel
+
+    got, finished = [], []
+    out = parallel.run_jobs(_square_and_report, [(i,) for i in range(5)], workers=2,
+                            on_message=got.append, on_result=lambda i, r: finished.append(i))
+    assert out == [0, 1, 4, 9, 16]
+    assert sorted(got) == [0, 1, 2, 3, 4] and sorted(finished) == [0, 1, 2, 3, 4]
+
+
+def _square_and_report(i):
+    from d5rl import parallel
+
+    parallel.report(i)
+    return i * i
+
+
 def test_round_trip_matches_generator():
     spec = register_toy("rt", num_episodes=9, per_shard=4)
     ds = load_dataset(spec, progress=False)

@@ -193,15 +193,22 @@ def test_killed_sweep_resumes_without_redoing_finished_cells(tmp_path):
     finally:
         if proc.poll() is None:
             proc.kill()
-    time.sleep(0.3)
-    orphans = []  # the workers died with the sweep (parent-death signal): none may race the resumed sweep
-    for proc_dir in Path("/proc").glob("[0-9]*"):
-        try:
-            cmdline = (proc_dir / "cmdline").read_bytes().decode(errors="replace")
-        except OSError:
-            continue
-        if "d5rl.runner.worker" in cmdline and str(run_dir) in cmdline:
-            orphans.append(cmdline)
+    # the workers die with the sweep (parent-death signal): none may race the resumed sweep.
+    # Dying takes a moment on a loaded machine, so allow a few seconds (an orphan would keep
+    # running its cell, which takes longer).
+    deadline = time.time() + 3
+    while True:
+        orphans = []
+        for proc_dir in Path("/proc").glob("[0-9]*"):
+            try:
+                cmdline = (proc_dir / "cmdline").read_bytes().decode(errors="replace")
+            except OSError:
+                continue
+            if "d5rl.runner.worker" in cmdline and str(run_dir) in cmdline:
+                orphans.append(cmdline)
+        if not orphans or time.time() > deadline:
+            break
+        time.sleep(0.2)
     if sys.platform.startswith("linux"):
         assert orphans == []
     time.sleep(0.5)

@@ -57,7 +57,7 @@ def test_missing_ray_gives_a_clear_error(monkeypatch):
     import builtins
 
     from d5rl.errors import MissingDependencyError
-    from d5rl.runner.bench import import_ray
+    from d5rl.parallel import import_ray
 
     real_import = builtins.__import__
 

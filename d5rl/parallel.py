@@ -1,0 +1,235 @@
+"""Run independent jobs in parallel: in this process, a local process pool, or a Ray cluster.
+
+Dataset generation and the render cache both cut their work into shards and run one
+job per shard through :func:`run_jobs`; the backend is chosen by ``workers``:
+
+- ``1``: in this process (no pickling; easiest to debug);
+- ``N > 1`` or ``None`` (all cores): a ``spawn`` process pool on this machine;
+- :class:`Ray` ``(address)``: tasks on an existing Ray cluster (``"auto"``, ``"ray://host:10001"``)
+  or on a private local instance (``"local"``).  The jobs read and write the dataset directory,
+  so it must be on a filesystem every node sees at the same path; :func:`run_jobs` checks that
+  before any work starts on a node and says so if it is not.
+
+Jobs report progress with :func:`report` (any picklable payload, e.g. one finished
+episode); the driver receives it through ``on_message`` whatever the backend.
+"""
+
+from __future__ import annotations
+
+import hashlib
+import multiprocessing as mp
+import os
+import pickle
+import queue as queue_mod
+import uuid
+from concurrent.futures import FIRST_COMPLETED, ProcessPoolExecutor, wait
+from dataclasses import dataclass
+from pathlib import Path
+from typing import Any, Callable, Sequence
+
+from d5rl.errors import D5RLError, MissingDependencyError
+
+
+@dataclass(frozen=True)
+class Ray:
+    """Run on a Ray cluster: ``"auto"`` (the one this machine belongs to), ``"ray://HOST:PORT"``,
+    or ``"local"`` (start a private instance on this machine)."""
+
+    address: str = "auto"
+
+
+Workers = int | Ray | None
+
+# --- worker side: where report() sends to --------------------------------------------------------------
+_SINK: Callable[[Any], None] | None = None
+_INITIALIZED: set[str] = set()
+
+
+def report(payload: Any) -> None:
+    """Send a progress message from inside a job to the driver's ``on_message`` (no-op without one)."""
+    if _SINK is not None:
+        _SINK(payload)
+
+
+def _init_pool_worker(q, initializer, initargs) -> None:
+    global _SINK
+    # one process per core: keep numerical libraries from starting a thread per core each
+    for var in ("OMP_NUM_THREADS", "MKL_NUM_THREADS", "OPENBLAS_NUM_THREADS"):
+        os.environ[var] = "1"
+    os.environ.setdefault("XLA_FLAGS", "--xla_cpu_multi_thread_eigen=false intra_op_parallelism_threads=1")
+    _SINK = q.put
+    if initializer is not None:
+        initializer(*initargs)
+
+
+def _call(fn, job):
+    return fn(*job)
+
+
+def _ray_job(fn, job, initializer, initargs, q, check_file: str | None):
+    """One job on a Ray worker: check the shared directory, initialize once per process, run."""
+    global _SINK
+    if check_file is not None and not Path(check_file).exists():
+        import socket
+
+        raise D5RLError(
+            f"Ray node {socket.gethostname()} cannot see {Path(check_file).parent}",
+            "put the dataset directory ($D5RL_HOME) on a filesystem shared by every node, at the same path",
+        )
+    key = hashlib.sha256(pickle.dumps((initializer, initargs))).hexdigest()
+    if initializer is not None and key not in _INITIALIZED:
+        initializer(*initargs)
+        _INITIALIZED.add(key)
+    _SINK = q.put
+    try:
+        return fn(*job)
+    finally:
+        _SINK = None
+
+
+# --- driver side ----------------------------------------------------------------------------------------
+def run_jobs(
+    fn: Callable,
+    jobs: Sequence[tuple],
+    *,
+    workers: Workers = None,
+    initializer: Callable | None = None,
+    initargs: tuple = (),
+    on_message: Callable[[Any], None] | None = None,
+    on_result: Callable[[int, Any], None] | None = None,
+    shared_dir: str | Path | None = None,
+) -> list:
+    """``[fn(*job) for job in jobs]``, in parallel; results in job order.
+
+    ``initializer(*initargs)`` runs once in each worker process before its first job
+    (in this process when ``workers == 1``).  ``on_result(i, result)`` is called as
+    each job finishes, so a caller can record progress that survives a later failure.
+    ``shared_dir`` is a directory the jobs write to; on Ray every node must see it.
+    """
+    jobs = list(jobs)
+    results: list = [None] * len(jobs)
+    if not jobs:
+        return results
+
+    def settle(i, res):
+        results[i] = res
+        if on_result is not None:
+            on_result(i, res)
+
+    if isinstance(workers, Ray):
+        _run_ray(fn, jobs, workers.address, initializer, initargs, on_message, settle, shared_dir)
+        return results
+    n = max(1, min(int(workers or os.cpu_count() or 1), len(jobs)))
+    if n == 1:
+        _run_here(fn, jobs, initializer, initargs, on_message, settle)
+    else:
+        _run_pool(fn, jobs, n, initializer, initargs, on_message, settle)
+    return results
+
+
+def _run_here(fn, jobs, initializer, initargs, on_message, settle) -> None:
+    global _SINK
+    if initializer is not None:
+        initializer(*initargs)
+    _SINK = on_message
+    try:
+        for i, job in enumerate(jobs):
+            settle(i, fn(*job))
+    finally:
+        _SINK = None
+
+
+def _drain(q, on_message, get) -> None:
+    while True:
+        try:
+            msg = get()
+        except queue_mod.Empty:
+            return
+        if on_message is not None:
+            on_message(msg)
+
+
+def _run_pool(fn, jobs, n, initializer, initargs, on_message, settle) -> None:
+    ctx = mp.get_context("spawn")  # fork is unsafe with JAX / OpenGL state in the parent
+    with ctx.Manager() as manager:
+        q = manager.Queue()
+        with ProcessPoolExecutor(n, mp_context=ctx, initializer=_init_pool_worker,
+                                 initargs=(q, initializer, initargs)) as pool:
+            futures = {pool.submit(_call, fn, job): i for i, job in enumerate(jobs)}
+            remaining = set(futures)
+            try:
+                while remaining:
+                    finished, remaining = wait(remaining, timeout=0.25, return_when=FIRST_COMPLETED)
+                    _drain(q, on_message, q.get_nowait)
+                    for fut in finished:
+                        settle(futures[fut], fut.result())
+                _drain(q, on_message, q.get_nowait)
+            except BaseException:
+                for fut in remaining:
+                    fut.cancel()
+                raise
+
+
+def import_ray():
+    try:
+        import ray
+    except ImportError as e:
+        raise MissingDependencyError(
+            "the Ray backend needs the `ray` package",
+            "pip install 'ray>=2.9' (or run without --ray to use the local process pool)",
+        ) from e
+    return ray
+
+
+def connect_ray(address: str | None):
+    """``ray`` after making sure it is connected (``"local"`` starts a private instance)."""
+    ray = import_ray()
+    if not ray.is_initialized():
+        try:
+            if address == "local":
+                ray.init(log_to_driver=False, include_dashboard=False)
+            else:
+                ray.init(address=address or "auto", log_to_driver=False)
+        except ConnectionError as e:
+            raise D5RLError(f"cannot reach a Ray cluster at {address or 'auto'} ({e})",
+                            "start one with `ray start --head` or pass --ray ADDRESS of a running head node") from e
+    return ray
+
+
+def _run_ray(fn, jobs, address, initializer, initargs, on_message, settle, shared_dir) -> None:
+    ray = connect_ray(address)
+    from ray.util.queue import Queue
+
+    check_file = None
+    if shared_dir is not None:
+        check = Path(shared_dir) / f".ray-check-{uuid.uuid4().hex}"
+        check.parent.mkdir(parents=True, exist_ok=True)
+        check.touch()
+        check_file = str(check.resolve())
+    q = Queue()
+    remote = ray.remote(num_cpus=1, max_retries=0)(_ray_job)
+    refs = {remote.remote(fn, job, initializer, initargs, q, check_file): i for i, job in enumerate(jobs)}
+    try:
+        while refs:
+            done, _ = ray.wait(list(refs), num_returns=1, timeout=0.25)
+            _drain(q, on_message, q.get_nowait)
+            for ref in done:
+                i = refs.pop(ref)
+                try:
+                    res = ray.get(ref)
+                except ray.exceptions.RayTaskError as e:
+                    cause = e.as_instanceof_cause()
+                    if isinstance(cause, D5RLError):  # a user-fixable problem: keep its one-line message
+                        raise D5RLError(cause.message, cause.hint) from None
+                    raise
+                settle(i, res)
+        _drain(q, on_message, q.get_nowait)
+    finally:
+        for ref in refs:
+            try:
+                ray.cancel(ref, force=True)
+            except Exception:  # noqa: BLE001 - best effort on the way out
+                pass
+        q.shutdown()
+        if check_file is not None:
+            Path(check_file).unlink(missing_ok=True)
