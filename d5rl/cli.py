@@ -101,11 +101,17 @@ def cmd_info(args) -> int:
 
 def cmd_generate(args) -> int:
     from d5rl.datasets.generation import generate
-
     from d5rl.parallel import Ray
+    from d5rl.registry import get_spec
 
     workers = Ray(args.ray) if args.ray else args.workers
     root = generate(args.task, seed=args.seed, num_episodes=args.episodes, workers=workers, force=args.force)
+    if not args.no_render and get_spec(args.task).dataset.derived is not None:
+        from d5rl.datasets.loading import load_dataset
+
+        # builds the derived cache (camera frames at the task's default cameras and size)
+        load_dataset(args.task, seed=args.seed, episodes=args.episodes, generate=False, in_memory=False,
+                     workers=workers)
     print(f"dataset ready: {root}")
     return 0
 
@@ -203,6 +209,8 @@ def build_parser() -> argparse.ArgumentParser:
                    help="run the shards on a Ray cluster instead ('auto', 'ray://HOST:10001', or 'local'); "
                         "$D5RL_HOME must be on a filesystem every node sees")
     q.add_argument("--force", action="store_true", help="delete what is on disk and start over")
+    q.add_argument("--no-render", action="store_true",
+                   help="pixel tasks: store states only; camera frames are rendered on first load instead")
     q.set_defaults(func=cmd_generate)
 
     q = sub.add_parser("verify", help="re-check every checksum of a generated dataset")

@@ -39,3 +39,14 @@ def test_verify_of_missing_dataset_says_generate(capsys):
     spec = register_toy("cli-missing")
     assert main(["verify", spec.id]) == 1
     assert f"d5rl generate {spec.id}" in capsys.readouterr().err
+
+
+def test_generate_renders_pixel_tasks_unless_told_not_to(tmp_path, monkeypatch):
+    from d5rl.cli import main
+    from d5rl.datasets.generation import dataset_root, dataset_spec
+
+    root = dataset_root(dataset_spec("wx-sorting-v0"))
+    assert main(["generate", "wx-sorting-v0", "--episodes", "1", "--workers", "1", "--no-render"]) == 0
+    assert (root / "manifest.json").exists() and not (root / "renders").exists()
+    assert main(["generate", "wx-sorting-v0", "--episodes", "1", "--workers", "1"]) == 0
+    assert [p.name for p in (root / "renders").iterdir()] == ["side-128x128"]
