@@ -44,3 +44,28 @@ def test_skilled_solves_more_than_novice(gen):
     novice = [gen.demonstrate(rd.MIXED_ORDER, rd.NOVICE, np.random.default_rng(i)).meta["num_solved"] for i in range(6)]
     assert np.mean(skilled) >= 3.0, skilled  # every sampled variant is solvable by the skilled operator
     assert np.mean(skilled) > np.mean(novice), (skilled, novice)
+
+
+@pytest.mark.parametrize("pose", [(0.01, -0.01, 0.05), (-0.01, 0.01, 0.0)])
+def test_skilled_operator_opens_a_moved_and_turned_microwave(pose):
+    import dataclasses
+
+    from d5rl.envs.kitchen.demonstrator import Demonstrator
+    from d5rl.envs.kitchen.randomized.domain import Domain
+    from d5rl.envs.kitchen.randomized.task import RandomizedKitchenEnv
+    from d5rl.envs.kitchen.subtasks import SUBTASK_NAMES
+
+    rng = np.random.default_rng(3)
+    domain = dataclasses.replace(Domain.sample(rng), microwave_pose=pose)
+    env = RandomizedKitchenEnv(obs_mode="state", domain=domain)
+    env.reset(seed=0)
+    moved = env.data.xpos[env.model.body("microroot").id].copy()
+    still = RandomizedKitchenEnv(obs_mode="state", domain=dataclasses.replace(domain, microwave_pose=(0, 0, 0)))
+    still.reset(seed=0)
+    assert np.linalg.norm(moved - still.data.xpos[still.model.body("microroot").id]) > 0.01
+    policy = Demonstrator(env, ["microwave"], rng, style=rd.SKILLED.style(rng))
+    for _ in range(250):
+        env.step(policy.act())
+        if env.completed()[SUBTASK_NAMES.index("microwave")]:
+            break
+    assert env.completed()[SUBTASK_NAMES.index("microwave")]
