@@ -154,11 +154,15 @@ class ShardWriter:
 
 
 def clean_temporaries(root: Path) -> int:
-    """Remove leftovers of killed writers (``.shard-*.tmp-*``); return how many."""
+    """Remove leftovers of killed writers (``.shard-*.tmp-*``) and of killed Ray runs'
+    shared-directory checks (``.ray-check-*``); return how many."""
     n = 0
     if root.exists():
         for p in root.glob(".shard-*.tmp-*"):
             shutil.rmtree(p, ignore_errors=True)
+            n += 1
+        for p in root.glob(".ray-check-*"):
+            p.unlink(missing_ok=True)
             n += 1
     return n
 
