@@ -10,8 +10,11 @@ from d5rl.envs.a1.calibrate import evaluate
 from d5rl.envs.a1.experts import AGENTS, POLICY_DIR
 from d5rl.envs.a1.policy import SnapshotPolicy
 
-pytestmark = pytest.mark.skipif(not (POLICY_DIR / "speed-0.5" / "log.json").exists(),
-                                reason="A1 policy snapshots are not trained")
+
+
+def test_policy_snapshots_ship_with_the_package():
+    for agent in AGENTS:
+        assert (POLICY_DIR / agent / "log.json").exists() and (POLICY_DIR / agent / "final.npz").exists(), agent
 
 
 def _first_index_of(gen, agent, learned=True):
