@@ -39,14 +39,17 @@ def test_same_seed_same_bytes_any_worker_count(tmp_path, monkeypatch):
 
 
 def test_ray_backend_writes_the_same_bytes(tmp_path, monkeypatch):
-    pytest.importorskip("ray")
+    ray = pytest.importorskip("ray")
     from d5rl.parallel import Ray
 
     spec = register_toy("ray", num_episodes=7, per_shard=2)
     monkeypatch.setenv("D5RL_HOME", str(tmp_path / "a"))
     a = tree_digest(generate(spec, workers=1, progress=False))
     monkeypatch.setenv("D5RL_HOME", str(tmp_path / "b"))
-    b = tree_digest(generate(spec, workers=Ray("local"), progress=False))
+    try:
+        b = tree_digest(generate(spec, workers=Ray("local"), progress=False))
+    finally:
+        ray.shutdown()  # later tests in this worker start their own instance
     assert a == b  # nothing left behind either (the shared-directory check file is removed)
 
 

@@ -18,7 +18,10 @@ REPO = Path(__file__).resolve().parents[2]
 
 @pytest.fixture(scope="module")
 def local_ray():
-    # workers import the test job from this checkout
+    # workers import the test job from this checkout; drop any instance an earlier test in this
+    # process started without these settings (ray.init refuses to run twice)
+    if ray.is_initialized():
+        ray.shutdown()
     ray.init(num_cpus=2, include_dashboard=False, log_to_driver=False,
              runtime_env={"env_vars": {"PYTHONPATH": str(REPO)}})
     yield
