@@ -44,3 +44,20 @@ def test_pixel_bc():
 @pytest.mark.parametrize("name", [n for n in AGENTS if n != "bc"])
 def test_pixel_agents(name):
     check_agent(name)
+
+
+def test_pixel_td3bc_delays_the_policy_like_the_state_agent():
+    # pixel TD3+BC selects the actor step instead of lax.cond (speed on XLA:CPU); same schedule
+    b = pixel_batch(16)
+    agent = make_agent("td3bc", _DS["ds"], batch_size=8)
+    agent = type(agent).create(0, b["observations"], b["actions"], agent.config)
+    batch = jax.tree_util.tree_map(lambda x: x[:8], b)
+    actor_params = []
+    for _ in range(4):
+        agent, m = agent.update(batch)
+        actor_params.append(jax.tree_util.tree_leaves(agent.actor.params))
+        assert (float(m["actor/loss"]) != 0.0) == (len(actor_params) % 2 == 1)
+    same = lambda p, q: all(np.array_equal(x, y) for x, y in zip(p, q))  # noqa: E731
+    assert int(agent.critic.step) == 4 and int(agent.actor.step) == 2  # policy_freq = 2: steps 1 and 3
+    assert same(actor_params[0], actor_params[1]) and not same(actor_params[1], actor_params[2])
+    assert same(actor_params[2], actor_params[3])
