@@ -25,14 +25,18 @@ def _human_bytes(n: float) -> str:
 
 def _dataset_status(spec) -> tuple[str, dict | None]:
     from d5rl.datasets import format as fmt
-    from d5rl.datasets.generation import dataset_root
+    from d5rl.datasets import generation
 
     if spec.dataset is None:
         return "-", None
-    root = dataset_root(spec.dataset)
+    root = generation.dataset_root(spec.dataset)
     path = root / fmt.MANIFEST
     if path.exists():
         m = fmt.load_json(path, "manifest")
+        try:
+            generation.check_current(m, spec.dataset, spec.dataset.default_seed, root)
+        except D5RLError:
+            return "stale (generate --force)", m
         full = m["num_episodes"] >= spec.dataset.num_episodes
         return ("ready" if full else f"partial ({m['num_episodes']} ep)"), m
     if (root / "shards").exists():

@@ -50,3 +50,15 @@ def test_generate_renders_pixel_tasks_unless_told_not_to(tmp_path, monkeypatch):
     assert (root / "manifest.json").exists() and not (root / "renders").exists()
     assert main(["generate", "wx-sorting-v0", "--episodes", "1", "--workers", "1"]) == 0
     assert [p.name for p in (root / "renders").iterdir()] == ["side-128x128"]
+
+
+def test_list_marks_data_from_older_generator_code_as_stale(capsys, monkeypatch):
+    from tests.datasets import toy
+
+    spec = register_toy("cli-stale", num_episodes=2, per_shard=2)
+    assert main(["generate", spec.id, "--workers", "1"]) == 0
+    monkeypatch.setattr(toy.ToyGenerator, "version", "changed", raising=False)
+    capsys.readouterr()
+    assert main(["list"]) == 0
+    line = next(ln for ln in capsys.readouterr().out.splitlines() if ln.startswith(spec.id))
+    assert "stale (generate --force)" in line

@@ -130,6 +130,11 @@ def _run_shard(root: str, index: int, start: int, stop: int, ident: dict) -> dic
 
 
 # --- driver side -------------------------------------------------------------------------------------
+def check_current(manifest: dict, dspec: DatasetSpec, seed: int, where: Path) -> None:
+    """Raise :class:`DatasetVersionError` unless ``manifest`` was written by this code and settings."""
+    _check_identity(manifest, _identity(dspec, seed, str(resolve(dspec.generator).version)), where)
+
+
 def _check_identity(found: dict, ident: dict, where: Path) -> None:
     diffs = [k for k in ident if found.get(k) != ident[k]]
     if diffs:

@@ -369,8 +369,7 @@ def load_dataset(
             f"(generated with --episodes); run `d5rl generate {spec.id}` for the full dataset or pass generate=True",
             stacklevel=2,
         )
-    generator_version = str(resolve(dspec.generator).version)
-    generation._check_identity(manifest, generation._identity(dspec, seed, generator_version), root)
+    generation.check_current(manifest, dspec, seed, root)
 
     n = min(wanted, manifest["num_episodes"])
     shard_dirs, records = [], []
