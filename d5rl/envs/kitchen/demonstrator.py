@@ -69,6 +69,7 @@ class Phase:
     any_roll: bool = True  # the hand may be turned half a turn about its axis (symmetric grasps)
     roll_room: float = 0.0  # the last joint must keep this much room (rad, positive) for a later turn
     wrist_home: bool = False  # drive joints 5 and 6 towards the rest posture (long moves between subtasks)
+    integral: bool = True  # integral action (off where the hand presses against something and would wind up)
 
 
 class Context:
@@ -161,14 +162,14 @@ class Controller:
         self.integral[:] = 0.0
 
     def action(self, pos: np.ndarray, rot: np.ndarray, grip: float, speed: float = 1.0,
-               wrist_home: bool = False) -> np.ndarray:
+               wrist_home: bool = False, integral: bool = True) -> np.ndarray:
         d = self.data
         mujoco.mj_jacSite(self.model, d, self._jacp, self._jacr, self.site)
         # orientation rows count less than position rows (rad vs m): reach the point first
         jac = np.vstack([self._jacp[:, :7], self.ROT_WEIGHT * self._jacr[:, :7]])
         ep = pos - d.site_xpos[self.site]
         er = orientation_error(rot, d.site_xmat[self.site].reshape(3, 3))
-        if np.linalg.norm(ep) < self.INTEGRAL_ZONE:
+        if integral and np.linalg.norm(ep) < self.INTEGRAL_ZONE:
             self.integral = np.clip(self.integral + ep, -self.INTEGRAL_MAX, self.INTEGRAL_MAX)
         v = self.gain * ep + self.INTEGRAL_GAIN * self.integral
         w = self.gain * er
@@ -368,9 +369,9 @@ def light_switch(ctx: Context) -> Iterator[Phase]:
     yield Phase("pre-push", _fixed(tip + side + np.array([0, -0.10, 0]), rot), grip=CLOSE, tol=0.03, rot_tol=0.25,
                 any_roll=False)
     yield Phase("reach", _fixed(tip + side + np.array([0, -0.01, 0]), rot), grip=CLOSE, tol=0.012, rot_tol=0.06,
-                max_steps=30, speed=0.8, any_roll=False)
+                max_steps=30, speed=0.8, any_roll=False, integral=False)
     yield Phase("push", _fixed(tip + np.array([-0.12, -0.01, side[2]]), rot), grip=CLOSE,
-                done=lambda c: c.joint("light_switch") <= -0.6, max_steps=40, speed=0.5, any_roll=False)
+                done=lambda c: c.joint("light_switch") <= -0.6, max_steps=40, speed=0.5, any_roll=False, integral=False)
     yield Phase("retreat", lambda c: (c.ee_pos + np.array([0, -0.12, 0]), rot), grip=CLOSE, tol=0.04, rot_tol=9,
                 max_steps=15, freeze=True)
 
@@ -570,7 +571,7 @@ class Demonstrator:
             act = np.zeros(9)
             act[7:] = ph.grip
         else:
-            act = self.ctrl.action(pos, rot, ph.grip, ph.speed * self.style.speed, ph.wrist_home)
+            act = self.ctrl.action(pos, rot, ph.grip, ph.speed * self.style.speed, ph.wrist_home, ph.integral)
         self._noise = 0.7 * self._noise + 0.3 * self.rng.normal(0.0, self.style.noise, size=9)
         act[:7] += self._noise[:7]
         return np.clip(act, -1.0, 1.0).astype(np.float32)
