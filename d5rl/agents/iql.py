@@ -14,6 +14,7 @@ from typing import Any
 
 import jax
 import jax.numpy as jnp
+import optax
 
 from d5rl.agents.augment import augment_batch
 from d5rl.agents.common import copy_tree, ENCODER_DEFAULTS, Agent, make_train_state, nonpytree_field, obs_ndims, prepare_example
@@ -42,6 +43,13 @@ def iql_critic_loss(agent, critic_params, batch):
     qs = agent.critic.apply_fn({"params": critic_params}, batch["observations"], batch["actions"])
     loss = ((qs - target[None]) ** 2).mean(axis=1).sum()
     return loss, {"critic/loss": loss, "critic/q": qs.mean(), "critic/target_q": target.mean()}
+
+
+def actor_schedule(config: Config):
+    """The policy's lr: cosine decay to 0 over ``actor_decay_steps`` updates (IQL's reference
+    implementation, offline runs), or constant when that is 0 or None."""
+    steps = config.get("actor_decay_steps")  # absent in runs saved before it existed
+    return optax.cosine_decay_schedule(config.actor_lr, int(steps)) if steps else config.actor_lr
 
 
 class IQLAgent(Agent):
@@ -94,7 +102,7 @@ class IQLAgent(Agent):
                                    state_dependent_std=config.state_dependent_std)
         critic_def = Critic(make_encoder(config), config.hidden_dims, config.num_qs, config.critic_layer_norm)
         value_def = ValueCritic(make_encoder(config), config.hidden_dims, config.critic_layer_norm)
-        actor = make_train_state(actor_def, k_a, (ex_obs,), config.actor_lr)
+        actor = make_train_state(actor_def, k_a, (ex_obs,), actor_schedule(config))
         critic = make_train_state(critic_def, k_c, (ex_obs, ex_act), config.critic_lr)
         value = make_train_state(value_def, k_v, (ex_obs,), config.value_lr)
         return cls(rng=rng, actor=actor, critic=critic, target_critic_params=copy_tree(critic.params), value=value,
@@ -105,6 +113,9 @@ def get_config() -> Config:
     return Config(
         agent_name="iql",  # name in d5rl.agents.AGENTS
         actor_lr=3e-4,  # policy Adam lr (IQL paper; D5RL pixels: 1e-4)
+        # None: `d5rl train` decays over --offline-steps when there is no online phase and keeps it
+        # constant when fine-tuning (as IQL's fine-tuning configs do)
+        actor_decay_steps=None,  # cosine decay of the policy lr over this many updates (IQL); 0: constant
         critic_lr=3e-4,  # Q Adam lr (IQL paper and D5RL)
         value_lr=3e-4,  # V Adam lr (IQL paper and D5RL)
         hidden_dims=(256, 256),  # MLP widths of all networks (IQL paper)

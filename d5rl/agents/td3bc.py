@@ -59,9 +59,18 @@ class TD3BCAgent(Agent):
         return self.replace(actor=actor, target_actor_params=soft_update(self.target_actor_params, actor.params, tau),
                             target_critic_params=soft_update(self.target_critic_params, self.critic.params, tau)), info
 
+    def normalize(self, obs):
+        """State observations standardised with the dataset's mean and std (TD3+BC); identity for
+        pixel observations and when no statistics are configured."""
+        if self.config.get("obs_mean") is None or isinstance(obs, dict):  # absent in older runs
+            return obs
+        return (obs - jnp.asarray(self.config.obs_mean, jnp.float32)) / jnp.asarray(self.config.obs_std, jnp.float32)
+
     def _update(self, batch):
         rng, aug_key, key = jax.random.split(self.rng, 3)
         batch = augment_batch(aug_key, batch, self.config)
+        batch = {**batch, "observations": self.normalize(batch["observations"]),
+                 "next_observations": self.normalize(batch["next_observations"])}
         g, critic_info = jax.grad(self.critic_loss, has_aux=True)(self.critic.params, batch, key)
         agent = self.replace(rng=rng, critic=self.critic.apply_gradients(grads=g))
         # critic.step counts critic updates; the first update (step 1) also trains the actor.
@@ -79,13 +88,13 @@ class TD3BCAgent(Agent):
 
     @jax.jit
     def _sample(self, obs, seed, temperature=1.0):
-        a = self.actor.apply_fn({"params": self.actor.params}, obs)
+        a = self.actor.apply_fn({"params": self.actor.params}, self.normalize(obs))
         noise = self.config.exploration_noise * temperature * jax.random.normal(seed, a.shape)
         return jnp.clip(a + noise, -1.0, 1.0)
 
     @jax.jit
     def _eval(self, obs, seed):
-        return self.actor.apply_fn({"params": self.actor.params}, obs)
+        return self.actor.apply_fn({"params": self.actor.params}, self.normalize(obs))
 
     @classmethod
     def create(cls, seed: int, example_observations, example_actions, config: Config | None = None):
@@ -114,6 +123,9 @@ def get_config() -> Config:
         policy_freq=2,  # actor/target update every this many critic updates (TD3)
         exploration_noise=0.1,  # Gaussian action noise when collecting online data (TD3)
         critic_layer_norm=False,  # LayerNorm in the critics
+        normalize_observations=True,  # standardise state observations with the dataset's statistics (TD3+BC)
+        obs_mean=None,  # per-dimension mean, filled by `d5rl train` when normalizing (None: identity)
+        obs_std=None,  # per-dimension std + 1e-3 (TD3+BC's epsilon), filled alike
         batch_size=256,  # minibatch size (256 state, 64 pixels in D5RL)
         **ENCODER_DEFAULTS,
     )

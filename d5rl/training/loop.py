@@ -113,6 +113,12 @@ def task_overrides(task_id: str, algo: str, pixels: bool, agent_config: Config) 
     return {k: tuple(v) if isinstance(v, list) else v for k, v in out.items()}
 
 
+def observation_stats(ds, eps: float = 1e-3) -> tuple[tuple[float, ...], tuple[float, ...]]:
+    """Per-dimension mean and std + ``eps`` of a state dataset's observations (TD3+BC's normalization)."""
+    obs = np.asarray(ds.observations, dtype=np.float64)
+    return tuple(float(x) for x in obs.mean(0)), tuple(float(x) for x in obs.std(0) + eps)
+
+
 def default_run_dir(algo: str, task_id: str, seed: int) -> Path:
     return Path("runs") / task_id / algo / f"seed{seed}"
 
@@ -239,6 +245,11 @@ def train(
     defaults = agent_config_fn()
     defaults = defaults.replace(**task_overrides(task_id, algo, pixels, defaults))
     agent_cfg, _ = split_overrides(overrides, defaults, get_train_config())
+    if agent_cfg.get("actor_decay_steps", 0) is None:  # "auto": decay over an offline-only run
+        agent_cfg = agent_cfg.replace(actor_decay_steps=int(offline_steps) if online_steps == 0 else 0)
+    if agent_cfg.get("normalize_observations") and not pixels and agent_cfg.obs_mean is None:
+        mean, std = observation_stats(ds)
+        agent_cfg = agent_cfg.replace(obs_mean=mean, obs_std=std)
     frame_stack = int(cfg.frame_stack or (3 if pixels else 1))
     needs_mc = algo == "calql"
     gamma = float(agent_cfg.get("discount", 0.99))

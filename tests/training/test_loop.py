@@ -39,6 +39,7 @@ def test_offline_run_writes_everything(tmp_path):
         assert (run / name).exists(), name
     cfg = json.loads((run / "config.json").read_text())
     assert cfg["agent"]["hidden_dims"] == [32, 32] and cfg["train"]["frame_stack"] == 1
+    assert cfg["agent"]["actor_decay_steps"] == 64  # IQL's policy lr decays over an offline-only run
     header = (run / "metrics.csv").read_text().splitlines()[0].split(",")
     assert "critic/loss" in header and "eval/toy-reach-v0/score" in header and "time/updates_per_s" in header
     assert res["step"] == 64 and np.isfinite(res["score"])
@@ -69,3 +70,14 @@ def test_other_run_in_directory_is_refused(tmp_path):
     train("bc", "toy-reach-v0", 8, 0, 0, overrides(), tmp_path / "r", dataset=ds)
     with pytest.raises(RunDirError):
         train("bc", "toy-reach-v0", 8, 0, 0, overrides(actor_lr=1e-3), tmp_path / "r", dataset=ds)
+
+
+def test_td3bc_run_normalizes_states_with_the_dataset_statistics(tmp_path):
+    ds = toy_dataset(20)
+    train("td3bc", "toy-reach-v0", 16, 0, 0, overrides(), tmp_path / "t", dataset=ds)
+    agent_cfg = json.loads((tmp_path / "t" / "config.json").read_text())["agent"]
+    obs = np.asarray(ds.observations, np.float64)
+    np.testing.assert_allclose(agent_cfg["obs_mean"], obs.mean(0), rtol=1e-6, atol=1e-9)
+    np.testing.assert_allclose(agent_cfg["obs_std"], obs.std(0) + 1e-3, rtol=1e-6)
+    agent, _ = load_run(tmp_path / "t")
+    assert agent.config.obs_mean == tuple(agent_cfg["obs_mean"])
