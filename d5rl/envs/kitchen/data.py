@@ -54,7 +54,7 @@ DEFAULT_CAMERAS = ("overview", "wrist")
 class KitchenStandardGenerator:
     """Episode generator (see the module docstring)."""
 
-    version = "kitchen-standard-demos-3"  # 2: integral action, wrist homing; 3: unwind before microwave/kettle (2 of 563 episodes change)
+    version = "kitchen-standard-demos-4"  # 2: integral action, wrist homing; 3: unwind before microwave/kettle; 4: straight reaches
 
     def __init__(self, task_id: str | None = None, max_steps: int = MAX_STEPS):
         from d5rl.envs.kitchen.task import KitchenEnv

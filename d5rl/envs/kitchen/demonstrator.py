@@ -71,6 +71,10 @@ class Phase:
     wrist_home: bool = False  # drive joints 5 and 6 towards the rest posture (long moves between subtasks)
     integral: bool = True  # integral action (off where the hand presses against something and would wind up)
     joints: np.ndarray | None = None  # a joint-space move instead: joint targets (rad) of the 7 arm joints
+    # when a joint's velocity saturates, scale all joints down together instead of clipping that one,
+    # so the hand keeps its direction (final approaches: clipping bent the path into a 4-6 cm sideways
+    # drift that put a finger against the hinged door after the microwave, kettle or bottom burner)
+    straight: bool = False
 
 
 class Context:
@@ -164,7 +168,7 @@ class Controller:
         self.integral[:] = 0.0
 
     def action(self, pos: np.ndarray, rot: np.ndarray, grip: float, speed: float = 1.0,
-               wrist_home: bool = False, integral: bool = True) -> np.ndarray:
+               wrist_home: bool = False, integral: bool = True, straight: bool = False) -> np.ndarray:
         d = self.data
         mujoco.mj_jacSite(self.model, d, self._jacp, self._jacr, self.site)
         # orientation rows count less than position rows (rad vs m): reach the point first
@@ -203,6 +207,10 @@ class Controller:
             qdot[4:6] = self.WRIST_HOME_GAIN * (self.posture[4:6] - q[4:6])
         act = np.empty(9)
         act[:7] = qdot / (ACTION_SCALE * self.TRACKING)
+        if straight:  # one joint saturates: slow all of them, keep the direction
+            peak = np.abs(act[:7]).max()
+            if peak > 1.0:
+                act[:7] /= peak
         act[7:] = grip
         return np.clip(act, -1.0, 1.0)
 
@@ -268,7 +276,7 @@ def _grasp_and_swing(ctx: Context, hinge_body: str, handle_site: str, joint: str
     handle = ctx.site(handle_site) + np.array([0, 0, ctx.rng.uniform(*dz)])
     n = _approach_dir(rot)
     yield Phase("pre-grasp", _fixed(handle - (0.12 + ctx.rng.uniform(0, 0.04)) * n, rot), tol=0.03, rot_tol=0.25)
-    yield Phase("reach", _fixed(handle + depth * n, rot), tol=0.012, max_steps=30, speed=0.8)
+    yield Phase("reach", _fixed(handle + depth * n, rot), tol=0.012, max_steps=30, speed=0.8, straight=True)
     yield Phase("grasp", _fixed(handle + depth * n, rot), grip=CLOSE, done=_never, max_steps=4)
     hinge = ctx.body_pos(hinge_body)
     q0 = ctx.joint(joint)
@@ -317,7 +325,7 @@ def slide_cabinet(ctx: Context) -> Iterator[Phase]:
     rot = R_FORWARD
     n = _approach_dir(rot)
     yield Phase("pre-grasp", _fixed(handle - (0.12 + ctx.rng.uniform(0, 0.04)) * n, rot), tol=0.03, rot_tol=0.25)
-    yield Phase("reach", _fixed(handle + 0.015 * n, rot), tol=0.012, max_steps=30, speed=0.8)
+    yield Phase("reach", _fixed(handle + 0.015 * n, rot), tol=0.012, max_steps=30, speed=0.8, straight=True)
     yield Phase("grasp", _fixed(handle + 0.015 * n, rot), grip=CLOSE, done=_never, max_steps=4)
     target = ctx.rng.uniform(0.36, 0.42)
 
@@ -384,7 +392,7 @@ def light_switch(ctx: Context) -> Iterator[Phase]:
     yield Phase("pre-push", _fixed(tip + side + np.array([0, -0.10, 0]), rot), grip=CLOSE, tol=0.03, rot_tol=0.25,
                 any_roll=False)
     yield Phase("reach", _fixed(tip + side + np.array([0, -0.01, 0]), rot), grip=CLOSE, tol=0.012, rot_tol=0.06,
-                max_steps=30, speed=0.8, any_roll=False, integral=False)
+                max_steps=30, speed=0.8, any_roll=False, integral=False, straight=True)
     yield Phase("push", _fixed(tip + np.array([-0.12, -0.01, side[2]]), rot), grip=CLOSE,
                 done=lambda c: c.joint("light_switch") <= -0.6, max_steps=40, speed=0.5, any_roll=False, integral=False)
     yield Phase("retreat", lambda c: (c.ee_pos + np.array([0, -0.12, 0]), rot), grip=CLOSE, tol=0.04, rot_tol=9,
@@ -423,7 +431,8 @@ def kettle(ctx: Context) -> Iterator[Phase]:
     offset = grasp - ctx.site("kettle_site")
     yield Phase("pre-grasp", _fixed(grasp - ctx.rng.uniform(0.10, 0.14) * n, rot), tol=0.03, rot_tol=0.2)
     # follow the handle live: the arm may have nudged the kettle on its way
-    yield Phase("reach", lambda c: (c.site("kettle_site") + offset, rot), tol=0.01, max_steps=25, speed=0.8)
+    yield Phase("reach", lambda c: (c.site("kettle_site") + offset, rot), tol=0.01, max_steps=25, speed=0.8,
+                straight=True)
     yield _hold("grasp", CLOSE, 5)
     lift = ctx.rng.uniform(0.07, 0.09)
     n_lift = int(ctx.rng.integers(5, 8))
@@ -604,7 +613,8 @@ class Demonstrator:
         elif ph.joints is not None:
             act = self.ctrl.joint_action(ph.joints, ph.grip, ph.speed * self.style.speed)
         else:
-            act = self.ctrl.action(pos, rot, ph.grip, ph.speed * self.style.speed, ph.wrist_home, ph.integral)
+            act = self.ctrl.action(pos, rot, ph.grip, ph.speed * self.style.speed, ph.wrist_home, ph.integral,
+                                   ph.straight)
         self._noise = 0.7 * self._noise + 0.3 * self.rng.normal(0.0, self.style.noise, size=9)
         act[:7] += self._noise[:7]
         return np.clip(act, -1.0, 1.0).astype(np.float32)

@@ -56,6 +56,15 @@ def test_demonstrator_unwinds_the_arm_before_microwave_and_kettle_after_right_si
     assert np.mean(last) >= 5 / 6
 
 
+def test_demonstrator_opens_the_hinge_after_the_microwave_kettle_or_bottom_burner():
+    # the final approach keeps its direction when a joint saturates; clipped joint velocities bent it
+    # into a sideways drift that put a finger against the door (these pairs: 0 of 4 seeds each)
+    hinge = []
+    for first in ("microwave", "kettle", "bottom burner"):
+        hinge.extend(_success([first, "hinge cabinet"], range(600, 602))[:, 1])
+    assert np.mean(hinge) >= 5 / 6
+
+
 @pytest.mark.slow
 @pytest.mark.xfail(reason="the 4-subtask bar (80%) is not met yet (~60%: hinge-last combinations run out of "
                    "steps); see docs/datacards/kitchen-standard.md", strict=False)
