@@ -205,9 +205,14 @@ class Controller:
         qdot[~free] = 0.0
         if wrist_home and abs(q[4] - self.posture[4]) > self.WRIST_FAR:
             qdot[4:6] = self.WRIST_HOME_GAIN * (self.posture[4:6] - q[4:6])
+        return self._to_action(qdot, grip, straight)
+
+    def _to_action(self, qdot: np.ndarray, grip: float, straight: bool = False) -> np.ndarray:
+        """Joint velocities (rad/s) as the env's normalized action; ``straight``: when a joint
+        saturates, slow all of them together so the motion keeps its direction."""
         act = np.empty(9)
         act[:7] = qdot / (ACTION_SCALE * self.TRACKING)
-        if straight:  # one joint saturates: slow all of them, keep the direction
+        if straight:
             peak = np.abs(act[:7]).max()
             if peak > 1.0:
                 act[:7] /= peak
@@ -222,10 +227,7 @@ class Controller:
         cap = self.JOINT_SPEED * speed
         if peak > cap:
             qdot *= cap / peak  # scale all joints together: a straight line in joint space
-        act = np.empty(9)
-        act[:7] = qdot / (ACTION_SCALE * self.TRACKING)
-        act[7:] = grip
-        return np.clip(act, -1.0, 1.0)
+        return self._to_action(qdot, grip)
 
     def best_roll(self, rot: np.ndarray, room: float = 0.0) -> bool:
         """Whether to use ``rot`` turned half a turn about the gripper axis instead (the parallel
