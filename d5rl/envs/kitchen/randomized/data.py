@@ -65,7 +65,9 @@ def play_subtasks(rng: np.random.Generator) -> list[str]:
 class RandomizedKitchenGenerator:
     """Episode generator; ``mode`` is ``demos``, ``play`` or ``suboptimal``."""
 
-    version = "kitchen-randomized-5"  # 2: microwave pose noise; 3: integral action, wrist homing; 4: unwind; 5: straight reaches
+    # 2: microwave pose noise; 3: integral action, wrist homing; 4: unwind; 5: straight reaches;
+    # 6: surface textures (the domain draws textures, so every episode changes)
+    version = "kitchen-randomized-6"
 
     def __init__(self, task_id: str | None = None, mode: str = "demos", max_steps: int = MAX_STEPS):
         from d5rl.envs.kitchen.randomized.task import RandomizedKitchenEnv

@@ -2,9 +2,12 @@
 
 Description
     The standard kitchen's seven subtasks, rewards and success checks, in a scene whose microwave
-    model (4), kettle model (8), cabinet/counter/wall/floor colours, extra lights (1-3, direction and
-    colour) and side-camera poses (look-at/distance sigma 0.05, angles sigma 1 deg) are drawn from the
-    env's seeded generator at every reset.  ``info["domain"]`` / ``env.domain`` hold the parameters.
+    model (4), kettle model (8), surface textures (cabinet panels, metal fronts, counter top, walls and
+    floor each get one of 8 procedural patterns, the stock texture or none, tinted with a random
+    colour), extra lights (1-3, direction and colour), side-camera poses (look-at/distance sigma 0.05,
+    angles sigma 1 deg), the kettle's start position (+-3 cm) and the microwave's pose (+-2 cm,
+    0-5 deg) are drawn from the env's seeded generator at every reset.  ``info["domain"]`` /
+    ``env.domain`` hold the parameters.
 
 Action space
     As the standard kitchen: ``Box(-1, 1, (9,))`` joint velocities.
@@ -18,13 +21,15 @@ Reward
     As the standard kitchen (number of target subtasks in their goal configuration).
 
 Start state
-    Rest pose with +-0.05 rad uniform noise on the 7 arm joints; kettle shifted +-3 cm in x and y.
+    Rest pose with +-0.05 rad uniform noise on the 7 arm joints; kettle shifted +-3 cm in x and y;
+    microwave shifted +-2 cm in x and y and turned 0-5 deg on the counter.
 
 Episode end
     Truncated after 500 steps.
 
 Version history
-    v0: first release (object position/yaw randomization not yet included).
+    v0: first release.  Domains recorded before surface textures (generator kitchen-randomized-5
+    and older) are refused by ``Domain.from_json``: regenerate such datasets.
 """
 
 from __future__ import annotations
