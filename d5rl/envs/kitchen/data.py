@@ -54,7 +54,9 @@ DEFAULT_CAMERAS = ("overview", "wrist")
 class KitchenStandardGenerator:
     """Episode generator (see the module docstring)."""
 
-    version = "kitchen-standard-demos-4"  # 2: integral action, wrist homing; 3: unwind before microwave/kettle; 4: straight reaches
+    # 2: integral action, wrist homing; 3: unwind before microwave/kettle; 4: straight reaches;
+    # 5: joint-space transits to inverse-kinematics solutions between subtasks
+    version = "kitchen-standard-demos-5"
 
     def __init__(self, task_id: str | None = None, max_steps: int = MAX_STEPS):
         from d5rl.envs.kitchen.task import KitchenEnv

@@ -46,9 +46,10 @@ def test_demonstrator_solves_mixed_and_a_hinge_last_sequence():
     assert solved.all(axis=1).mean() >= 0.75
 
 
-def test_demonstrator_unwinds_the_arm_before_microwave_and_kettle_after_right_side_subtasks():
-    # after the slide cabinet or the light switch the wrist is wound round; without a joint-space
-    # move back to the rest posture the microwave handle was out of reach (0/8 and 2/8 seeds)
+def test_demonstrator_reaches_microwave_and_kettle_after_right_side_subtasks():
+    # after the slide cabinet or the light switch the wrist is wound round; moving on in task space
+    # left the microwave handle out of reach (0/8 and 2/8 seeds); a joint-space transit to an
+    # inverse-kinematics solution found from the rest posture arrives unwound
     last = []
     for first, then in (("slide cabinet", "microwave"), ("light switch", "microwave"), ("slide cabinet", "kettle")):
         solved = _success([first, then], range(600, 602))
@@ -56,18 +57,38 @@ def test_demonstrator_unwinds_the_arm_before_microwave_and_kettle_after_right_si
     assert np.mean(last) >= 5 / 6
 
 
-def test_demonstrator_opens_the_hinge_after_the_microwave_kettle_or_bottom_burner():
-    # the final approach keeps its direction when a joint saturates; clipped joint velocities bent it
-    # into a sideways drift that put a finger against the door (these pairs: 0 of 4 seeds each)
-    hinge = []
-    for first in ("microwave", "kettle", "bottom burner"):
-        hinge.extend(_success([first, "hinge cabinet"], range(600, 602))[:, 1])
-    assert np.mean(hinge) >= 5 / 6
+def test_demonstrator_opens_the_hinge_after_two_knobs():
+    # after the knobs the hinge's pre-grasp stalled with joint 6 at its limit, even with unlimited
+    # time (0 of 6 seeds before the joint-space transit before the hinge)
+    solved = _success(["kettle", "bottom burner", "top burner", "hinge cabinet"], range(600, 603))
+    assert solved[:, -1].mean() >= 2 / 3
+
+
+def test_inverse_kinematics_reaches_a_reachable_pose_without_touching_the_simulation():
+    import mujoco
+
+    from d5rl.envs.kitchen.demonstrator import Controller
+
+    env = KitchenEnv(obs_mode="state")
+    env.reset(seed=0)
+    ctrl = Controller(env)
+    before = env.data.qpos.copy()
+    data = mujoco.MjData(env.model)
+    data.qpos[:] = before
+    for offset in ([0.4, 0.3, -0.3, 0.5, 0.2, -0.3, 0.4], [-0.5, 0.4, 0.2, 0.8, -0.3, 0.2, -0.6]):
+        data.qpos[:7] = np.clip(ctrl.posture + offset, ctrl.lo + 0.1, ctrl.hi - 0.1)
+        mujoco.mj_kinematics(env.model, data)
+        pos, rot = data.site_xpos[ctrl.site].copy(), data.site_xmat[ctrl.site].reshape(3, 3).copy()
+        q, err, rot_err = ctrl.solve_ik(pos, rot, ctrl.posture)
+        assert err < 0.005 and rot_err < 0.05, (err, rot_err)
+        data.qpos[:7] = q
+        mujoco.mj_kinematics(env.model, data)
+        assert np.linalg.norm(data.site_xpos[ctrl.site] - pos) < 0.005
+        assert np.all(q >= ctrl.lo) and np.all(q <= ctrl.hi)
+    assert np.array_equal(env.data.qpos, before)
 
 
 @pytest.mark.slow
-@pytest.mark.xfail(reason="the 4-subtask bar (80%) is not met yet (~65%: hinge-last combinations run out of "
-                   "steps); see docs/datacards/kitchen-standard.md", strict=False)
 def test_demonstrator_bars_full():
     for name in SUBTASK_NAMES:
         assert _success([name], range(1000, 1030)).mean() >= 0.9, name

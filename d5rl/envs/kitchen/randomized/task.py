@@ -5,9 +5,9 @@ Description
     model (4), kettle model (8), surface textures (cabinet panels, metal fronts, counter top, walls and
     floor each get one of 8 procedural patterns, the stock texture or none, tinted with a random
     colour), extra lights (1-3, direction and colour), side-camera poses (look-at/distance sigma 0.05,
-    angles sigma 1 deg), the kettle's start position (+-3 cm) and the microwave's pose (+-2 cm,
-    0-5 deg) are drawn from the env's seeded generator at every reset.  ``info["domain"]`` /
-    ``env.domain`` hold the parameters.
+    angles sigma 1 deg), the kettle's start position (+-3 cm in x, -1..+3 cm in y) and the
+    microwave's pose (+-4 cm, 0-12 deg) are drawn from the env's seeded generator at every reset.
+    ``info["domain"]`` / ``env.domain`` hold the parameters.
 
 Action space
     As the standard kitchen: ``Box(-1, 1, (9,))`` joint velocities.
@@ -21,8 +21,8 @@ Reward
     As the standard kitchen (number of target subtasks in their goal configuration).
 
 Start state
-    Rest pose with +-0.05 rad uniform noise on the 7 arm joints; kettle shifted +-3 cm in x and y;
-    microwave shifted +-2 cm in x and y and turned 0-5 deg on the counter.
+    Rest pose with +-0.05 rad uniform noise on the 7 arm joints; kettle shifted +-3 cm in x and
+    -1..+3 cm in y; microwave shifted +-4 cm in x and y and turned 0-12 deg on the counter.
 
 Episode end
     Truncated after 500 steps.
