@@ -46,7 +46,7 @@ def test_skilled_solves_more_than_novice(gen):
     assert np.mean(skilled) > np.mean(novice), (skilled, novice)
 
 
-@pytest.mark.parametrize("pose", [(0.04, -0.04, np.deg2rad(12.0)), (-0.04, 0.04, 0.0)])  # corners of the range
+@pytest.mark.parametrize("pose", [(0.03, -0.03, np.deg2rad(8.0)), (-0.03, 0.03, 0.0)])  # corners of the range
 def test_skilled_operator_opens_a_moved_and_turned_microwave(pose):
     import dataclasses
 
@@ -69,3 +69,32 @@ def test_skilled_operator_opens_a_moved_and_turned_microwave(pose):
         if env.completed()[SUBTASK_NAMES.index("microwave")]:
             break
     assert env.completed()[SUBTASK_NAMES.index("microwave")]
+
+
+@pytest.mark.parametrize("offset,yaw_deg", [((0.03, -0.01), 15.0), ((-0.03, 0.03), -15.0)])  # corners of the range
+def test_skilled_operator_moves_a_shifted_and_turned_kettle(offset, yaw_deg):
+    import dataclasses
+
+    from d5rl.envs.kitchen.demonstrator import Demonstrator
+    from d5rl.envs.kitchen.randomized.domain import Domain
+    from d5rl.envs.kitchen.randomized.task import RandomizedKitchenEnv
+    from d5rl.envs.kitchen.subtasks import SUBTASK_NAMES
+
+    rng = np.random.default_rng(4)
+    domain = dataclasses.replace(Domain.sample(rng), kettle_offset=offset, kettle_yaw=float(np.deg2rad(yaw_deg)))
+    env = RandomizedKitchenEnv(obs_mode="state", domain=domain)
+    env.reset(seed=0)
+    kettle = env.model.body("kettleroot").id
+    heading = env.data.xmat[kettle].reshape(3, 3)[:, 0]
+    still = RandomizedKitchenEnv(obs_mode="state", domain=dataclasses.replace(domain, kettle_yaw=0.0))
+    still.reset(seed=0)
+    turned = np.degrees(np.arccos(np.clip(heading @ still.data.xmat[kettle].reshape(3, 3)[:, 0], -1, 1)))
+    assert abs(turned - abs(yaw_deg)) < 0.5
+    policy = Demonstrator(env, ["kettle"], rng, style=rd.SKILLED.style(rng))
+    done = False
+    for _ in range(250):
+        env.step(policy.act())
+        done |= bool(env.completed()[SUBTASK_NAMES.index("kettle")])
+        if done:
+            break
+    assert done

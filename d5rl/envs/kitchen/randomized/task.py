@@ -5,8 +5,8 @@ Description
     model (4), kettle model (8), surface textures (cabinet panels, metal fronts, counter top, walls and
     floor each get one of 8 procedural patterns, the stock texture or none, tinted with a random
     colour), extra lights (1-3, direction and colour), side-camera poses (look-at/distance sigma 0.05,
-    angles sigma 1 deg), the kettle's start position (+-3 cm in x, -1..+3 cm in y) and the
-    microwave's pose (+-4 cm, 0-12 deg) are drawn from the env's seeded generator at every reset.
+    angles sigma 1 deg), the kettle's start pose (+-3 cm in x, -1..+3 cm in y, +-15 deg yaw) and the
+    microwave's pose (+-3 cm, 0-8 deg) are drawn from the env's seeded generator at every reset.
     ``info["domain"]`` / ``env.domain`` hold the parameters.
 
 Action space
@@ -22,7 +22,7 @@ Reward
 
 Start state
     Rest pose with +-0.05 rad uniform noise on the 7 arm joints; kettle shifted +-3 cm in x and
-    -1..+3 cm in y; microwave shifted +-4 cm in x and y and turned 0-12 deg on the counter.
+    -1..+3 cm in y and turned +-15 deg; microwave shifted +-3 cm in x and y and turned 0-8 deg on the counter.
 
 Episode end
     Truncated after 500 steps.
@@ -90,6 +90,8 @@ class RandomizedKitchenEnv(KitchenEnv):
         super().reset(seed=None, options=options)
         adr = int(self.model.jnt_qposadr[self.model.joint("kettle").id])  # free joint: x, y, z, quat
         self.data.qpos[adr : adr + 2] += domain.kettle_offset
+        turn = np.array([np.cos(domain.kettle_yaw / 2), 0.0, 0.0, np.sin(domain.kettle_yaw / 2)])
+        mujoco.mju_mulQuat(self.data.qpos[adr + 3 : adr + 7], turn, self.data.qpos[adr + 3 : adr + 7].copy())
         mujoco.mj_forward(self.model, self.data)
         completed = self.completed()
         self._solved = completed[self._task_cols].copy()
