@@ -98,3 +98,37 @@ def test_skilled_operator_moves_a_shifted_and_turned_kettle(offset, yaw_deg):
         if done:
             break
     assert done
+
+
+@pytest.mark.parametrize("model", [1, 2, 3])
+def test_each_microwave_model_has_its_own_handle_and_opens(model):
+    import dataclasses
+
+    import mujoco
+
+    from d5rl.envs.kitchen.demonstrator import Demonstrator
+    from d5rl.envs.kitchen.randomized.domain import MICROWAVE_HANDLES, Domain, compiled_variant
+    from d5rl.envs.kitchen.randomized.task import RandomizedKitchenEnv
+    from d5rl.envs.kitchen.subtasks import SUBTASK_NAMES
+
+    stock, variant = compiled_variant(0, 0, 1), compiled_variant(model, 0, 1)
+    x, length, radius = MICROWAVE_HANDLES[model]
+    assert variant.site("microhandle_site").pos[0] == pytest.approx(x)
+    door = variant.body("microdoorroot").id
+    bars = [g for g in range(variant.ngeom) if variant.geom_bodyid[g] == door
+            and variant.geom_type[g] == mujoco.mjtGeom.mjGEOM_CAPSULE and abs(variant.geom_pos[g][2]) < 1e-9]
+    assert len(bars) == 2  # the visual bar and the collision bar
+    assert any(variant.geom_conaffinity[g] for g in bars)
+    assert all(variant.geom_size[g][1] == pytest.approx(length) for g in bars)
+    assert not np.allclose(stock.site("microhandle_site").pos, variant.site("microhandle_site").pos)
+    rng = np.random.default_rng(20 + model)
+    env = RandomizedKitchenEnv(obs_mode="state", domain=dataclasses.replace(Domain.sample(rng), microwave=model))
+    env.reset(seed=0)
+    policy = Demonstrator(env, ["microwave"], rng, style=rd.SKILLED.style(rng))
+    opened = False
+    for _ in range(250):
+        env.step(policy.act())
+        opened |= bool(env.completed()[SUBTASK_NAMES.index("microwave")])
+        if opened:
+            break
+    assert opened
