@@ -66,7 +66,8 @@ class RandomizedKitchenGenerator:
     """Episode generator; ``mode`` is ``demos``, ``play`` or ``suboptimal``."""
 
     # 2: microwave pose noise; 3: integral action, wrist homing; 4: unwind; 5: straight reaches;
-    # 6: surface textures (the domain draws textures, so every episode changes)
+    # 6: joint-space transits, surface textures, microwave handles per model, wider microwave and kettle
+    #    poses, kettle yaw (the domain draws more numbers, so every episode changes)
     version = "kitchen-randomized-6"
 
     def __init__(self, task_id: str | None = None, mode: str = "demos", max_steps: int = MAX_STEPS):
