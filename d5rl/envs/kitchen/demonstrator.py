@@ -166,9 +166,7 @@ class Controller:
     def action(self, pos: np.ndarray, rot: np.ndarray, grip: float, speed: float = 1.0,
                integral: bool = True, straight: bool = False) -> np.ndarray:
         d = self.data
-        mujoco.mj_jacSite(self.model, d, self._jacp, self._jacr, self.site)
-        # orientation rows count less than position rows (rad vs m): reach the point first
-        jac = np.vstack([self._jacp[:, :7], self.ROT_WEIGHT * self._jacr[:, :7]])
+        jac = self._jacobian(d)
         ep = pos - d.site_xpos[self.site]
         er = orientation_error(rot, d.site_xmat[self.site].reshape(3, 3))
         if integral and np.linalg.norm(ep) < self.INTEGRAL_ZONE:
@@ -184,22 +182,33 @@ class Controller:
         q = d.qpos[:7]
         rest = (self.posture - q) * self.POSTURE_GAIN
         free = np.ones(7, dtype=bool)
-        # soft joint-limit avoidance: joints close to a limit take a smaller share of the motion
-        room = np.minimum(q - self.lo, self.hi - q)
-        weight = np.clip(room / 0.3, 0.1, 1.0)
+        weight = self._limit_weights(q)
         for _ in range(3):  # drop joints that would be pushed further into their limits, re-solve
-            w = weight * free
-            jw = jac * w
-            jjt = jw @ jac.T + self.damping**2 * np.eye(6)
-            qdot = w * (jac.T @ np.linalg.solve(jjt, twist))
-            null = np.diag(w) - jw.T @ np.linalg.solve(jjt, jac * w)
-            qdot += null @ rest
+            qdot = self._solve(jac, twist, weight * free, rest)
             blocked = ((q <= self.lo + self.margin) & (qdot < 0)) | ((q >= self.hi - self.margin) & (qdot > 0))
             if not (blocked & free).any():
                 break
             free &= ~blocked
         qdot[~free] = 0.0
         return self._to_action(qdot, grip, straight)
+
+    def _jacobian(self, data: mujoco.MjData) -> np.ndarray:
+        """(6, 7) site Jacobian of the arm joints; orientation rows count less than position rows
+        (rad vs m): reach the point first."""
+        mujoco.mj_jacSite(self.model, data, self._jacp, self._jacr, self.site)
+        return np.vstack([self._jacp[:, :7], self.ROT_WEIGHT * self._jacr[:, :7]])
+
+    def _limit_weights(self, q: np.ndarray) -> np.ndarray:
+        """Soft joint-limit avoidance: joints close to a limit take a smaller share of the motion."""
+        return np.clip(np.minimum(q - self.lo, self.hi - q) / 0.3, 0.1, 1.0)
+
+    def _solve(self, jac: np.ndarray, twist: np.ndarray, w: np.ndarray, rest: np.ndarray) -> np.ndarray:
+        """Weighted damped least squares for ``twist``, plus ``rest`` projected into the null space."""
+        jw = jac * w
+        jjt = jw @ jac.T + self.damping**2 * np.eye(6)
+        qdot = w * (jac.T @ np.linalg.solve(jjt, twist))
+        null = np.diag(w) - jw.T @ np.linalg.solve(jjt, jac * w)
+        return qdot + null @ rest
 
     def _to_action(self, qdot: np.ndarray, grip: float, straight: bool = False) -> np.ndarray:
         """Joint velocities (rad/s) as the env's normalized action; ``straight``: when a joint
@@ -233,22 +242,15 @@ class Controller:
         s = self._scratch
         s.qpos[:] = self.data.qpos
         q = np.array(q_seed, dtype=float)
-        jacp, jacr = np.zeros((3, self.model.nv)), np.zeros((3, self.model.nv))
         for _ in range(iters):
             s.qpos[:7] = q
             mujoco.mj_kinematics(self.model, s)
             mujoco.mj_comPos(self.model, s)
-            mujoco.mj_jacSite(self.model, s, jacp, jacr, self.site)
-            jac = np.vstack([jacp[:, :7], self.ROT_WEIGHT * jacr[:, :7]])
+            jac = self._jacobian(s)
             er = orientation_error(rot, s.site_xmat[self.site].reshape(3, 3))
             twist = np.concatenate([pos - s.site_xpos[self.site], self.ROT_WEIGHT * er])
-            w = np.clip(np.minimum(q - self.lo, self.hi - q) / 0.3, 0.1, 1.0)
-            jw = jac * w
-            jjt = jw @ jac.T + self.damping**2 * np.eye(6)
-            dq = w * (jac.T @ np.linalg.solve(jjt, twist))
-            null = np.diag(w) - jw.T @ np.linalg.solve(jjt, jac * w)
-            dq += null @ (self.IK_POSTURE_GAIN * (self.posture - q))
-            q = np.clip(q + dq, self.lo + 0.05, self.hi - 0.05)
+            rest = self.IK_POSTURE_GAIN * (self.posture - q)
+            q = np.clip(q + self._solve(jac, twist, self._limit_weights(q), rest), self.lo + 0.05, self.hi - 0.05)
         s.qpos[:7] = q
         mujoco.mj_kinematics(self.model, s)
         err = float(np.linalg.norm(pos - s.site_xpos[self.site]))
@@ -577,7 +579,7 @@ class Demonstrator:
         self.current_subtask = None
 
     def _wrist_wound(self) -> bool:
-        q = self.ctx.env.data.qpos[4:7]
+        q = self.ctx.data.qpos[4:7]
         return float(np.abs(q - self.ctrl.posture[4:7]).max()) > WOUND
 
     def _transit_joints(self, pos: np.ndarray, rot: np.ndarray, phase: Phase) -> np.ndarray:
