@@ -55,6 +55,73 @@ class MLP(nn.Module):
         return x
 
 
+# --- pixel encoder ------------------------------------------------------------------------------
+def _pool_taps(x):
+    """The 3x3 taps of every stride-2 window of an even-sized NHWC map, SAME padding (one -inf
+    row/column at the bottom/right, as ``nn.max_pool(..., padding="SAME")`` pads)."""
+    h, w = x.shape[-3:-1]
+    xp = jnp.pad(x, ((0, 0),) * (x.ndim - 3) + ((0, 1), (0, 1), (0, 0)), constant_values=-jnp.inf)
+    return [[xp[..., i:i + h:2, j:j + w:2, :] for j in range(3)] for i in range(3)]
+
+
+def _pool_forward(x):
+    taps = _pool_taps(x)
+    rows = [jnp.maximum(jnp.maximum(t[0], t[1]), t[2]) for t in taps]
+    return jnp.maximum(jnp.maximum(rows[0], rows[1]), rows[2])
+
+
+def _shift_one(a, axis):
+    """``a[p - 1]`` along ``axis`` (zeros at ``p = 0``)."""
+    pad = [(0, 0)] * a.ndim
+    pad[axis] = (1, 0)
+    return jax.lax.slice_in_dim(jnp.pad(a, pad), 0, a.shape[axis], axis=axis)
+
+
+@jax.custom_vjp
+def _max_pool_even(x):
+    return _pool_forward(x)
+
+
+def _max_pool_even_fwd(x):
+    out = _pool_forward(x)
+    return out, (x, out)
+
+
+def _max_pool_even_bwd(res, g):
+    """Route each window's gradient to its first maximal tap, then interleave without a scatter:
+    input row 2p gets tap 0 of window p and tap 2 of window p-1, row 2p+1 tap 1 of window p
+    (the same for columns)."""
+    x, out = res
+    taps = _pool_taps(x)
+    taken = jnp.zeros(g.shape, bool)
+    gt = [[None] * 3 for _ in range(3)]
+    for i in range(3):
+        for j in range(3):
+            hit = (taps[i][j] == out) & ~taken
+            taken = taken | hit
+            gt[i][j] = jnp.where(hit, g, 0.0)
+    r = g.ndim - 3  # row axis
+    rows = [jnp.stack([gt[0][j] + _shift_one(gt[2][j], r), gt[1][j]], axis=r + 1) for j in range(3)]
+    c = r + 2  # column axis of the (..., H/2, 2, W/2, C) row-interleaved arrays
+    dx = jnp.stack([rows[0] + _shift_one(rows[2], c), rows[1]], axis=c + 1)
+    return (dx.reshape(x.shape),)
+
+
+_max_pool_even.defvjp(_max_pool_even_fwd, _max_pool_even_bwd)
+
+
+def max_pool_3x3_s2(x):
+    """3x3 max-pool, stride 2, SAME padding: the values of ``nn.max_pool(x, (3, 3), (2, 2), "SAME")``.
+
+    On even-sized maps the gradient is computed without XLA's select-and-scatter, which
+    runs ~6x slower than this on CPU (64x64x16 maps, batch 64: 83 ms vs 8 ms forward+backward;
+    PyTorch's kernel 24 ms). Odd sizes fall back to ``nn.max_pool``.
+    """
+    if x.shape[-3] % 2 or x.shape[-2] % 2:
+        return nn.max_pool(x, (3, 3), strides=(2, 2), padding="SAME")
+    return _max_pool_even(x)
+
+
 class ImpalaEncoder(nn.Module):
     """The IMPALA CNN (Espeholt et al. 2018): 3 stacks of conv → max-pool → 2 residual blocks."""
 
@@ -65,7 +132,7 @@ class ImpalaEncoder(nn.Module):
     def __call__(self, x):
         for ch in self.channels:
             x = nn.Conv(ch, (3, 3), padding="SAME", kernel_init=default_init)(x)
-            x = nn.max_pool(x, (3, 3), strides=(2, 2), padding="SAME")
+            x = max_pool_3x3_s2(x)
             for _ in range(self.num_blocks):
                 y = nn.relu(x)
                 y = nn.Conv(ch, (3, 3), padding="SAME", kernel_init=default_init)(y)
