@@ -11,6 +11,10 @@ import os
 # Headless rendering by default; must precede the first `import mujoco`.
 os.environ.setdefault("MUJOCO_GL", "egl")
 
+from d5rl.xla_flags import configure_default_flags  # noqa: E402
+
+configure_default_flags()  # before JAX's first computation; see d5rl/xla_flags.py
+
 __version__ = "0.1.0"
 
 from d5rl.errors import D5RLError  # noqa: E402

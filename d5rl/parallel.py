@@ -28,6 +28,7 @@ from pathlib import Path
 from typing import Any, Callable, Sequence
 
 from d5rl.errors import D5RLError, MissingDependencyError
+from d5rl.xla_flags import SINGLE_THREAD, add_xla_flags
 
 
 @dataclass(frozen=True)
@@ -56,7 +57,7 @@ def _init_pool_worker(q, initializer, initargs) -> None:
     # one process per core: keep numerical libraries from starting a thread per core each
     for var in ("OMP_NUM_THREADS", "MKL_NUM_THREADS", "OPENBLAS_NUM_THREADS"):
         os.environ[var] = "1"
-    os.environ.setdefault("XLA_FLAGS", "--xla_cpu_multi_thread_eigen=false intra_op_parallelism_threads=1")
+    add_xla_flags(*SINGLE_THREAD)
     _SINK = q.put
     if initializer is not None:
         initializer(*initargs)

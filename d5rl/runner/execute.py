@@ -28,10 +28,10 @@ from pathlib import Path
 
 from d5rl.runner.grid import (CELL_FILE, DONE_FILE, ERROR_FILE, FAILURES_FILE, LOCK_FILE, LOG_FILE,
                               RUNNER_FILES, Cell)
+from d5rl.xla_flags import SINGLE_THREAD, add_xla_flags
 
 # Environment of a worker: one compute thread per process, so K workers use K cores.
 SINGLE_THREAD_ENV = {
-    "XLA_FLAGS": "--xla_cpu_multi_thread_eigen=false intra_op_parallelism_threads=1",
     "OMP_NUM_THREADS": "1",
     "MKL_NUM_THREADS": "1",
     "OPENBLAS_NUM_THREADS": "1",
@@ -43,11 +43,8 @@ SINGLE_THREAD_ENV = {
 def configure_worker(single_thread: bool = True, nice: int = 0) -> None:
     """Set the per-process environment before any numerical library is imported."""
     if single_thread:
+        add_xla_flags(*SINGLE_THREAD)
         for k, v in SINGLE_THREAD_ENV.items():
-            if k == "XLA_FLAGS" and os.environ.get(k):
-                if "xla_cpu_multi_thread_eigen" not in os.environ[k]:
-                    os.environ[k] = os.environ[k] + " " + v
-                continue
             os.environ.setdefault(k, v)
     os.environ.setdefault("MUJOCO_GL", "egl")
     if nice:

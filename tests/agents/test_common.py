@@ -101,6 +101,40 @@ def test_color_jitter_properties():
     np.testing.assert_array_equal(np.asarray(aug["proprio"]), 1.0)
 
 
+def chained_color_jitter(key, imgs, brightness=0.2, contrast=0.2, saturation=0.2, hue=0.05, p=0.8):
+    """The jitter written step by step (same random draws as ``color_jitter``), in numpy float64."""
+    kb, kc, ks, kh, kp = jax.random.split(key, 5)
+    b, h, w, c = imgs.shape
+    fb, fc, fs = (np.asarray(jax.random.uniform(k, (b,), minval=1 - r, maxval=1 + r), np.float64)[:, None, None, None, None]
+                  for k, r in ((kb, brightness), (kc, contrast), (ks, saturation)))
+    theta = np.asarray(jax.random.uniform(kh, (b,), minval=-hue, maxval=hue), np.float64) * 2 * np.pi
+    apply = np.asarray(jax.random.uniform(kp, (b,)) < p)
+    x = np.asarray(imgs, np.float64).reshape(b, h, w, c // 3, 3)
+    luma = np.array([0.299, 0.587, 0.114])
+    y = x * fb
+    mean = (y @ luma).mean(axis=(1, 2), keepdims=True)[..., None]
+    y = (y - mean) * fc + mean
+    gray = (y @ luma)[..., None]
+    y = (y - gray) * fs + gray
+    to_yiq = np.array([[0.299, 0.587, 0.114], [0.596, -0.274, -0.322], [0.211, -0.523, 0.312]])
+    for i in range(b):
+        rot = np.array([[1, 0, 0], [0, np.cos(theta[i]), -np.sin(theta[i])], [0, np.sin(theta[i]), np.cos(theta[i])]])
+        y[i] = y[i] @ (np.linalg.inv(to_yiq) @ rot @ to_yiq).T
+    y = np.where(apply[:, None, None, None, None], y, x)
+    return np.clip(np.round(y), 0, 255).astype(np.uint8).reshape(b, h, w, c)
+
+
+def test_color_jitter_is_the_four_steps_in_order():
+    rng = np.random.default_rng(1)
+    img = jnp.asarray(rng.integers(0, 256, (16, 8, 8, 9)), jnp.uint8)
+    for seed in range(3):
+        key = jax.random.PRNGKey(seed)
+        ours = np.asarray(color_jitter(key, img), int)
+        ref = chained_color_jitter(key, img).astype(int)
+        assert np.max(np.abs(ours - ref)) <= 1 and np.mean(ours != ref) < 0.01
+        assert np.mean(ours != np.asarray(img, int)) > 0.5  # it did jitter
+
+
 def test_cosine_schedule():
     betas = np.asarray(cosine_beta_schedule(20))
     assert betas.shape == (20,) and np.all(betas > 0) and np.all(betas <= 0.999)
