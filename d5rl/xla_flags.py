@@ -12,8 +12,8 @@ from importlib import metadata
 
 # On XLA:CPU, convolutions and their gradients run on Eigen instead of YNNPACK (the default in
 # jaxlib 0.10); dot products and reductions stay on YNNPACK, so programs without convolutions
-# compile as before. Measured with bench/agents.py on a 2-core x86 CPU, batch 64: the IMPALA
-# encoder's forward+backward 300 -> 230 ms, pixel agents 1.2-1.4x more updates/s.
+# compile as before. Measured on a 2-core x86 CPU, batch 64: the IMPALA encoder's forward+backward
+# ~290 -> ~230 ms; bench/agents.py pixel agents 0.9-1.5x the updates/s (1.3x for most).
 # The flag is experimental: it is set only for the jaxlib versions it was measured on (an unknown
 # flag makes XLA abort).
 CONV_ON_EIGEN = "--xla_cpu_experimental_ynn_fusion_type=LIBRARY_FUSION_TYPE_INDIVIDUAL_DOT,LIBRARY_FUSION_TYPE_REDUCE"
