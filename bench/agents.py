@@ -10,9 +10,10 @@ two 64×64 cameras with 3 stacked frames (18 channels) + 9-D proprioception,
 20 critic steps + 1 actor step) in both implementations.
 
 JAX is timed as the training loop runs it: state agents do ``updates_per_call``
-updates per jit call with ``lax.scan``; pixel agents one per call.  Numbers are
-medians over alternating repeats (the machine may be shared).  Without torch the
-reference column is empty.
+updates per jit call with ``lax.scan``; pixel agents one per call.  JAX runs with the
+XLA flags ``import d5rl`` sets (d5rl/xla_flags.py; set them in ``XLA_FLAGS`` to compare).
+Numbers are medians over alternating repeats (the machine may be shared).  Without torch
+the reference column is empty.
 """
 
 from __future__ import annotations
