@@ -114,7 +114,7 @@ def max_pool_3x3_s2(x):
     """3x3 max-pool, stride 2, SAME padding: the values of ``nn.max_pool(x, (3, 3), (2, 2), "SAME")``.
 
     On even-sized maps the gradient is computed without XLA's select-and-scatter, which
-    runs ~6x slower than this on CPU (64x64x16 maps, batch 64: 83 ms vs 8 ms forward+backward;
+    runs 6-10x slower than this on CPU (64x64x16 maps, batch 64: 83 ms vs 8 ms forward+backward;
     PyTorch's kernel 24 ms). Odd sizes fall back to ``nn.max_pool``.
     """
     if x.shape[-3] % 2 or x.shape[-2] % 2:
