@@ -10,33 +10,25 @@ from d5rl import xla_flags
 from d5rl.xla_flags import CONV_ON_EIGEN, add_xla_flags, configure_default_flags
 
 
-def test_flags_are_appended_unless_the_user_set_them():
+def test_flags_are_appended_unless_the_user_set_them(monkeypatch):
     env = {}
     add_xla_flags("--a=1", "b=2", environ=env)
     assert env["XLA_FLAGS"] == "--a=1 b=2"
+    monkeypatch.setattr(xla_flags, "jaxlib_version", lambda: (0, 10))
     env = {"XLA_FLAGS": "--xla_cpu_experimental_ynn_fusion_type= --other=3"}
-    configure_default_flags_for(env, (0, 10))
+    configure_default_flags(environ=env)
     assert env["XLA_FLAGS"] == "--xla_cpu_experimental_ynn_fusion_type= --other=3"  # the user's choice stands
     env = {"XLA_FLAGS": "--other=3"}
-    configure_default_flags_for(env, (0, 10))
+    configure_default_flags(environ=env)
     assert env["XLA_FLAGS"] == "--other=3 " + CONV_ON_EIGEN
 
 
-def test_the_experimental_flag_is_only_set_for_measured_jaxlib_versions():
+@pytest.mark.parametrize("version", [(0, 11), None])
+def test_the_experimental_flag_is_only_set_for_measured_jaxlib_versions(monkeypatch, version):
+    monkeypatch.setattr(xla_flags, "jaxlib_version", lambda: version)
     env = {}
-    configure_default_flags_for(env, (0, 11))
+    configure_default_flags(environ=env)
     assert "XLA_FLAGS" not in env
-    configure_default_flags_for(env, None)
-    assert "XLA_FLAGS" not in env
-
-
-def configure_default_flags_for(env, version):
-    mp = pytest.MonkeyPatch()
-    try:
-        mp.setattr(xla_flags, "jaxlib_version", lambda: version)
-        configure_default_flags(environ=env)
-    finally:
-        mp.undo()
 
 
 CHECK = """
