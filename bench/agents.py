@@ -90,6 +90,33 @@ def jax_runner(name: str, pixels: bool, k: int):
 
 
 # ============================== PyTorch side ==============================
+def torch_impala():
+    """The IMPALA encoder in PyTorch (NCHW), as d5rl's ``ImpalaEncoder``: a class taking in-channels."""
+    import torch
+    import torch.nn as nn
+    import torch.nn.functional as F
+
+    class Impala(nn.Module):
+        def __init__(self, in_ch, chans=(16, 32, 32)):
+            super().__init__()
+            self.stacks = nn.ModuleList()
+            for ch in chans:
+                self.stacks.append(nn.ModuleList([nn.Conv2d(in_ch, ch, 3, padding=1)] +
+                                                 [nn.Conv2d(ch, ch, 3, padding=1) for _ in range(4)]))
+                in_ch = ch
+
+        def forward(self, x):
+            for convs in self.stacks:
+                x = convs[0](x)
+                x = F.max_pool2d(x, 3, 2, padding=1)
+                for j in (1, 3):
+                    y = convs[j + 1](F.relu(convs[j](F.relu(x))))
+                    x = x + y
+            return torch.flatten(F.relu(x), 1)
+
+    return Impala
+
+
 def torch_runner(name: str, pixels: bool):
     import torch
     import torch.nn as nn
@@ -142,23 +169,7 @@ def torch_runner(name: str, pixels: bool):
                     x = F.relu(x)
             return x[..., 0]
 
-    class Impala(nn.Module):
-        def __init__(self, in_ch, chans=(16, 32, 32)):
-            super().__init__()
-            self.stacks = nn.ModuleList()
-            for ch in chans:
-                self.stacks.append(nn.ModuleList([nn.Conv2d(in_ch, ch, 3, padding=1)] +
-                                                 [nn.Conv2d(ch, ch, 3, padding=1) for _ in range(4)]))
-                in_ch = ch
-
-        def forward(self, x):
-            for convs in self.stacks:
-                x = convs[0](x)
-                x = F.max_pool2d(x, 3, 2, padding=1)
-                for j in (1, 3):
-                    y = convs[j + 1](F.relu(convs[j](F.relu(x))))
-                    x = x + y
-            return torch.flatten(F.relu(x), 1)
+    Impala = torch_impala()
 
     class Encoder(nn.Module):
         """Identity for states; IMPALA + Dense/LN/tanh + proprio for pixels."""
