@@ -101,6 +101,24 @@ def test_color_jitter_properties():
     np.testing.assert_array_equal(np.asarray(aug["proprio"]), 1.0)
 
 
+def test_augment_observations_is_each_camera_shifted_and_jittered_with_its_own_key():
+    """The jitter runs once over the cameras concatenated (for speed); per camera it must be exactly
+    random_shift + color_jitter with that camera's keys, and a 4-channel camera is only shifted."""
+    rng = np.random.default_rng(3)
+    obs = {"pixels/a": jnp.asarray(rng.integers(0, 256, (5, 12, 12, 9)), jnp.uint8),
+           "pixels/b": jnp.asarray(rng.integers(0, 256, (5, 12, 12, 6)), jnp.uint8),
+           "pixels/depth": jnp.asarray(rng.integers(0, 256, (5, 12, 12, 4)), jnp.uint8)}
+    key = jax.random.PRNGKey(7)
+    aug = jax.jit(augment_observations)(key, obs)
+    for i, k in enumerate(sorted(obs)):
+        k1, k2 = jax.random.split(jax.random.fold_in(key, i))
+        want = random_shift(k1, obs[k], 4)
+        if want.shape[-1] % 3 == 0:
+            want = color_jitter(k2, want)
+        np.testing.assert_array_equal(np.asarray(aug[k]), np.asarray(want), err_msg=k)
+    assert not np.array_equal(np.asarray(aug["pixels/a"]), np.asarray(obs["pixels/a"]))
+
+
 def chained_color_jitter(key, imgs, brightness=0.2, contrast=0.2, saturation=0.2, hue=0.05, p=0.8):
     """The jitter written step by step (same random draws as ``color_jitter``), in numpy float64."""
     kb, kc, ks, kh, kp = jax.random.split(key, 5)
