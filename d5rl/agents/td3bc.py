@@ -66,25 +66,57 @@ class TD3BCAgent(Agent):
             return obs
         return (obs - jnp.asarray(self.config.obs_mean, jnp.float32)) / jnp.asarray(self.config.obs_std, jnp.float32)
 
-    def _update(self, batch):
+    def _critic_step(self, batch):
+        """Augment and normalise ``batch``, update the critic; returns ``(agent, batch, metrics)``."""
         rng, aug_key, key = jax.random.split(self.rng, 3)
         batch = augment_batch(aug_key, batch, self.config)
         batch = {**batch, "observations": self.normalize(batch["observations"]),
                  "next_observations": self.normalize(batch["next_observations"])}
         g, critic_info = jax.grad(self.critic_loss, has_aux=True)(self.critic.params, batch, key)
-        agent = self.replace(rng=rng, critic=self.critic.apply_gradients(grads=g))
+        return self.replace(rng=rng, critic=self.critic.apply_gradients(grads=g)), batch, critic_info
+
+    def _actor_due(self):
         # critic.step counts critic updates; the first update (step 1) also trains the actor.
-        due = (agent.critic.step - 1) % self.config.policy_freq == 0
+        return self.critic.step % self.config.policy_freq == 0  # before this update's critic step
+
+    def _update(self, batch):
+        due = self._actor_due()
+        agent, batch, critic_info = self._critic_step(batch)
         if not is_pixel_obs(batch["observations"]):
             zeros = {k: jnp.zeros((), jnp.float32) for k in ACTOR_METRICS}
             agent, actor_info = jax.lax.cond(due, lambda a: a._update_actor(batch), lambda a: (a, zeros), agent)
         else:
-            # XLA:CPU runs convolutions inside a lax.cond branch ~20x slower (measured 7.9 s vs 0.7 s
-            # per pixel update), so pixel agents always compute the actor step and select it.
+            # XLA:CPU runs convolutions inside a lax.cond branch ~10-20x slower (6.6 s vs 0.55 s per
+            # pixel update), so inside one program (update_many) pixel agents compute the actor step
+            # and select it; update() and update_donated() pick one of two programs instead.
             updated, actor_info = agent._update_actor(batch)
             agent = jax.tree_util.tree_map(lambda new, old: jnp.where(due, new, old), updated, agent)
             actor_info = {k: jnp.where(due, v, 0.0) for k, v in actor_info.items()}
         return agent, {**critic_info, **actor_info}
+
+    def _update_pixels(self, batch, with_actor: bool):
+        agent, batch, critic_info = self._critic_step(batch)
+        if with_actor:
+            agent, actor_info = agent._update_actor(batch)
+        else:
+            actor_info = {k: jnp.zeros((), jnp.float32) for k in ACTOR_METRICS}
+        return agent, {**critic_info, **actor_info}
+
+    _pixel_update = jax.jit(_update_pixels, static_argnames="with_actor")
+    _pixel_update_donated = jax.jit(_update_pixels, static_argnames="with_actor", donate_argnums=0)
+
+    def update(self, batch):
+        """One update. For pixel observations the host reads the step count and runs a program
+        with or without the actor step, so the delayed actor costs nothing on the other steps."""
+        if not is_pixel_obs(batch["observations"]):
+            return Agent.update(self, batch)
+        return self._pixel_update(batch, with_actor=bool(self._actor_due()))
+
+    def update_donated(self, batch):
+        """:meth:`update` that donates the old agent's buffers (training loops)."""
+        if not is_pixel_obs(batch["observations"]):
+            return Agent.update_donated(self, batch)
+        return self._pixel_update_donated(batch, with_actor=bool(self._actor_due()))
 
     @jax.jit
     def _sample(self, obs, seed, temperature=1.0):

@@ -1,6 +1,7 @@
 """Pixel observations (two 16×16 cameras, 3 stacked frames, proprio) through every agent."""
 
 import jax
+import jax.numpy as jnp
 import numpy as np
 import pytest
 
@@ -47,7 +48,8 @@ def test_pixel_agents(name):
 
 
 def test_pixel_td3bc_delays_the_policy_like_the_state_agent():
-    # pixel TD3+BC selects the actor step instead of lax.cond (speed on XLA:CPU); same schedule
+    # pixel TD3+BC's update() runs a program with or without the actor step (no lax.cond: slow on
+    # XLA:CPU); same schedule as the state agent
     b = pixel_batch(16)
     agent = make_agent("td3bc", _DS["ds"], batch_size=8)
     agent = type(agent).create(0, b["observations"], b["actions"], agent.config)
@@ -61,3 +63,19 @@ def test_pixel_td3bc_delays_the_policy_like_the_state_agent():
     assert int(agent.critic.step) == 4 and int(agent.actor.step) == 2  # policy_freq = 2: steps 1 and 3
     assert same(actor_params[0], actor_params[1]) and not same(actor_params[1], actor_params[2])
     assert same(actor_params[2], actor_params[3])
+
+
+def test_pixel_td3bc_host_schedule_matches_the_in_program_one():
+    """update() picks one of two programs on the host; update_many() selects inside one program.
+    Both must give the same agent."""
+    b = pixel_batch(16)
+    agent = make_agent("td3bc", _DS["ds"], batch_size=8)
+    agent = type(agent).create(0, b["observations"], b["actions"], agent.config)
+    batches = [jax.tree_util.tree_map(lambda x, i=i: x[8 * i:8 * (i + 1)], b) for i in range(2)]
+    one_by_one = agent
+    for batch in batches:
+        one_by_one, _ = one_by_one.update(batch)
+    stacked = jax.tree_util.tree_map(lambda *x: np.stack(x), *batches)
+    in_scan, _ = jax.tree_util.tree_map(jnp.copy, agent).update_many(stacked)  # donates its argument
+    for x, y in zip(jax.tree_util.tree_leaves(one_by_one), jax.tree_util.tree_leaves(in_scan)):
+        np.testing.assert_allclose(np.asarray(x), np.asarray(y), rtol=1e-4, atol=1e-5)
