@@ -77,9 +77,14 @@ def color_jitter(key, imgs, brightness=0.2, contrast=0.2, saturation=0.2, hue=0.
     instead of ~20). ``A = fc·fb·H·S`` with the hue matrix ``H`` and the saturation matrix ``S``; the
     offset is ``(1 - fc)·fb·mean`` on every channel because grey stays grey under ``H`` and ``S``.
     """
-    a, off = jitter_params(key, imgs.shape[0], brightness, contrast, saturation, hue, p)
+    return apply_jitter(imgs, *_frame_maps(key, imgs, brightness, contrast, saturation, hue, p))
+
+
+def _frame_maps(key, imgs, *jitter_args):
+    """:func:`jitter_params` for ``imgs``' samples, repeated for each of its stacked frames."""
+    a, off = jitter_params(key, imgs.shape[0], *jitter_args)
     frames = imgs.shape[-1] // 3
-    return apply_jitter(imgs, jnp.repeat(a[:, None], frames, 1), jnp.repeat(off[:, None], frames, 1))
+    return jnp.repeat(a[:, None], frames, 1), jnp.repeat(off[:, None], frames, 1)
 
 
 def augment_observations(key, obs, shift_pad: int = 4, jitter: bool = True):
@@ -103,11 +108,10 @@ def augment_observations(key, obs, shift_pad: int = 4, jitter: bool = True):
             img = random_shift(k1, img, shift_pad)
         out[k] = img
         if jitter and img.shape[-1] % 3 == 0:
-            a, off = jitter_params(k2, img.shape[0])
-            frames = img.shape[-1] // 3
+            a, off = _frame_maps(k2, img)
             jittered.append(k)
-            maps.append(jnp.repeat(a[:, None], frames, 1))
-            offs.append(jnp.repeat(off[:, None], frames, 1))
+            maps.append(a)
+            offs.append(off)
     if jittered:
         x = apply_jitter(jnp.concatenate([out[k] for k in jittered], -1),
                          jnp.concatenate(maps, 1), jnp.concatenate(offs, 1))
