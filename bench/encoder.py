@@ -20,7 +20,6 @@ import os
 import platform
 import statistics
 import sys
-import time
 
 import numpy as np
 
@@ -28,15 +27,17 @@ CAMS, STACK, PIX = 2, 3, 64
 
 
 def timer(fn, seconds: float) -> float:
-    """Seconds per call of ``fn`` (which must block until its result is ready)."""
+    """Seconds per call of ``fn`` (which must block until its result is ready), after one warm-up call."""
+    from agents import rate  # bench/agents.py
+
     fn()
-    n, t0 = 0, time.perf_counter()
-    while True:
-        fn()
-        n += 1
-        el = time.perf_counter() - t0
-        if el >= seconds:
-            return el / n
+
+    def run(n: int) -> int:
+        for _ in range(n):
+            fn()
+        return n
+
+    return 1.0 / rate(run, seconds)
 
 
 def conv_shapes(channels, in_ch: int, size: int):
@@ -146,7 +147,9 @@ def main(argv=None) -> int:
     print(f"{'conv':22s} {'n':>2s} {'pass':4s} {'jax':>8s} {'torch':>8s} {'ratio':>6s}")
     total_j = total_t = 0.0
     first = True
-    for size, cin, cout, n in conv_shapes((16, 32, 32), 3 * STACK * CAMS, PIX):
+    from d5rl.agents.networks import ImpalaEncoder
+
+    for size, cin, cout, n in conv_shapes(ImpalaEncoder.channels, 3 * STACK * CAMS, PIX):
         jl, tl = jax_layer(args.batch, size, cin, cout, rng), torch_layer(args.batch, size, cin, cout, rng)
         for name in ("fwd", "dx", "dw"):
             if name == "dx" and first:
