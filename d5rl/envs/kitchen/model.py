@@ -19,14 +19,13 @@ from __future__ import annotations
 
 import dataclasses
 import functools
-import importlib.util
 import os
 from pathlib import Path
 
 import mujoco
 import numpy as np
 
-from d5rl.errors import MissingAssetError
+from d5rl.assets import asset_path
 
 ROBOT_JOINTS = (
     "robot:panda0_joint1",
@@ -55,24 +54,10 @@ INIT_QPOS = np.array(
     ]
 )  # fmt: skip
 
-_ASSET_HINT = (
-    "install the kitchen assets with `pip install --no-deps gymnasium-robotics` "
-    "(only its MJCF/mesh files are used, so its own dependencies are not needed)"
-)
-
-
 def asset_dir() -> Path:
-    """``.../gymnasium_robotics/envs/assets/kitchen_franka`` (without importing gymnasium_robotics,
-    whose ``__init__`` needs optional packages we do not use)."""
-    try:
-        spec = importlib.util.find_spec("gymnasium_robotics")
-    except (ImportError, ValueError):
-        spec = None
-    if spec is None or not spec.submodule_search_locations:
-        raise MissingAssetError("the Franka Kitchen assets (package gymnasium-robotics) are not installed", _ASSET_HINT)
-    path = Path(list(spec.submodule_search_locations)[0]) / "envs" / "assets" / "kitchen_franka"
-    if not (path / "kitchen_assets" / "kitchen_env_model.xml").is_file():
-        raise MissingAssetError(f"{path}/kitchen_assets/kitchen_env_model.xml is missing", _ASSET_HINT)
+    """``kitchen_franka`` of the ``gymnasium-robotics`` wheel (see :mod:`d5rl.assets`)."""
+    path = asset_path("gymnasium-robotics", "envs", "assets", "kitchen_franka")
+    asset_path("gymnasium-robotics", "envs", "assets", "kitchen_franka", "kitchen_assets", "kitchen_env_model.xml")
     return path
 
 

