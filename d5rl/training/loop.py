@@ -5,7 +5,8 @@ A run lives in one directory::
 
     run_dir/config.json       resolved agent + training config (written before training)
     run_dir/metrics.jsonl     one row per log / evaluation step (also metrics.csv, tb/ if TensorBoard)
-    run_dir/checkpoint/       agent, optimizer, RNG states, replay buffer, step (atomic)
+    run_dir/checkpoint/       agent, optimizer, RNG states, replay buffer, step (atomic, checksummed;
+                              the previous one is kept: see d5rl/training/checkpoint.py)
     run_dir/summary.json      final evaluation
     run_dir/videos/           evaluation videos (``save_video=True``)
 
@@ -19,8 +20,6 @@ from __future__ import annotations
 import json
 import math
 import os
-import pickle
-import shutil
 import time
 from pathlib import Path
 from typing import Any, Iterable, Mapping
@@ -32,6 +31,7 @@ from d5rl.agents import get_agent
 from d5rl.agents.config import Config, ConfigError
 from d5rl.agents.networks import is_pixel_obs
 from d5rl.errors import D5RLError
+from d5rl.training.checkpoint import Checkpoint, load_checkpoint, restore_agent, save_checkpoint
 from d5rl.training.envs import load_task_dataset, make_task_env
 from d5rl.training.evaluation import evaluate
 from d5rl.training.logger import Logger
@@ -121,40 +121,6 @@ def observation_stats(ds, eps: float = 1e-3) -> tuple[tuple[float, ...], tuple[f
 
 def default_run_dir(algo: str, task_id: str, seed: int) -> Path:
     return Path("runs") / task_id / algo / f"seed{seed}"
-
-
-# --- checkpoints --------------------------------------------------------------------------------------
-def save_checkpoint(run_dir: Path, state: dict, buffer: ReplayBuffer | None) -> None:
-    """Write ``checkpoint/`` atomically (a kill leaves either the old or the new one)."""
-    tmp, final, old = run_dir / "checkpoint.tmp", run_dir / "checkpoint", run_dir / "checkpoint.old"
-    shutil.rmtree(tmp, ignore_errors=True)
-    tmp.mkdir(parents=True)
-    with open(tmp / "state.pkl", "wb") as f:
-        pickle.dump(state, f)
-    if buffer is not None:
-        np.savez(tmp / "buffer.npz", **buffer.state_dict())
-    for p in tmp.iterdir():
-        with open(p, "rb") as f:
-            os.fsync(f.fileno())
-    if final.exists():
-        shutil.rmtree(old, ignore_errors=True)
-        final.rename(old)
-    tmp.rename(final)
-    shutil.rmtree(old, ignore_errors=True)
-
-
-def load_checkpoint(run_dir: Path) -> tuple[dict, dict | None] | None:
-    for name in ("checkpoint", "checkpoint.old"):
-        d = run_dir / name
-        if (d / "state.pkl").exists():
-            with open(d / "state.pkl", "rb") as f:
-                state = pickle.load(f)
-            buf = None
-            if (d / "buffer.npz").exists():
-                with np.load(d / "buffer.npz") as z:
-                    buf = {k: z[k] for k in z.files}
-            return state, buf
-    return None
 
 
 # --- batches ---------------------------------------------------------------------------------------------
@@ -289,10 +255,10 @@ def train(
     capacity = int(cfg.buffer_capacity or (min(max(online_steps, 1), 20_000) if pixels else max(online_steps, 1)))
 
     if resume is not None:
-        state, buf_state = resume
+        state, buf_state = resume.state, resume.buffer
         if state["online_started"] and fresh_online:
             agent = agent_cls.create(seed + 1, example["observations"], example["actions"], agent_cfg)
-        agent = agent.from_bytes(state["agent"])
+        agent = restore_agent(agent, resume)
         rng.bit_generator.state = state["rng"]
         step, online_done, episode = state["step"], state["online_done"], state["episode"]
         logger.truncate_after(step)
@@ -304,10 +270,11 @@ def train(
             env_probe.close()
 
     def checkpoint():
-        save_checkpoint(run_dir, {"agent": agent.to_bytes(), "rng": rng.bit_generator.state, "step": step,
-                                  "online_done": online_done, "episode": episode,
-                                  "metric_sums": dict(acc), "metric_count": acc_n,
-                                  "online_started": step > offline_steps or (online_done > 0)}, buffer)
+        state = {"rng": rng.bit_generator.state, "step": step, "online_done": online_done, "episode": episode,
+                 "metric_sums": dict(acc), "metric_count": acc_n,
+                 "online_started": step > offline_steps or (online_done > 0)}
+        save_checkpoint(run_dir, Checkpoint(agent.to_bytes(), state,
+                                            buffer.state_dict() if buffer is not None else None))
 
     def run_eval(at_step: int, episodes: int) -> dict:
         video = run_dir / "videos" / f"step{at_step:09d}.mp4" if cfg.save_video else None
@@ -320,8 +287,8 @@ def train(
 
     total = offline_steps + online_steps
     bar = _Progress(total, step, cfg.progress)
-    acc: dict[str, float] = dict(resume[0].get("metric_sums", {})) if resume is not None else {}
-    acc_n = int(resume[0].get("metric_count", 0)) if resume is not None else 0
+    acc: dict[str, float] = dict(resume.state.get("metric_sums", {})) if resume is not None else {}
+    acc_n = int(resume.state.get("metric_count", 0)) if resume is not None else 0
     t_window, n_window = time.perf_counter(), 0
 
     def record(metrics, n_updates: int):
@@ -438,4 +405,4 @@ def load_run(run_dir: str | Path):
     action = np.zeros(env.action_space.shape, np.float32)
     env.close()
     agent = agent_cls.create(resolved["seed"], obs, action, cfg)
-    return agent.from_bytes(ckpt[0]["agent"]), resolved
+    return restore_agent(agent, ckpt), resolved

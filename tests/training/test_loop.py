@@ -35,7 +35,8 @@ def test_offline_run_writes_everything(tmp_path):
     res = train("iql", "toy-reach-v0", 64, 0, 0, overrides(eval_interval=32, checkpoint_interval=32),
                 tmp_path / "run", dataset=ds)
     run = tmp_path / "run"
-    for name in ("config.json", "metrics.jsonl", "metrics.csv", "summary.json", "checkpoint/state.pkl"):
+    for name in ("config.json", "metrics.jsonl", "metrics.csv", "summary.json", "checkpoint/manifest.json",
+                 "checkpoint/agent.msgpack", "checkpoint/state.json"):
         assert (run / name).exists(), name
     cfg = json.loads((run / "config.json").read_text())
     assert cfg["agent"]["hidden_dims"] == [32, 32] and cfg["train"]["frame_stack"] == 1

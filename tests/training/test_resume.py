@@ -47,7 +47,7 @@ def test_online_resume_is_exact_for_rlpd(tmp_path):
     full = train("rlpd", "toy-reach-v0", 0, 75, 2, kw, tmp_path / "a", dataset=ds)
     with pytest.raises(KeyboardInterrupt):
         train("rlpd", "toy-reach-v0", 0, 75, 2, kw, tmp_path / "b", dataset=ds, _stop_at=40)
-    state_step = __import__("pickle").loads((tmp_path / "b" / "checkpoint" / "state.pkl").read_bytes())["step"]
+    state_step = json.loads((tmp_path / "b" / "checkpoint" / "state.json").read_text())["step"]
     assert state_step == 25  # the checkpoint due at step 20 waits for the episode end
     resumed = train("rlpd", "toy-reach-v0", 0, 75, 2, kw, tmp_path / "b", dataset=ds)
     for a, b in zip(leaves(full["agent"]), leaves(resumed["agent"])):

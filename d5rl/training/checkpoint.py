@@ -1,0 +1,178 @@
+"""Training checkpoints that cannot run code: msgpack + JSON + ``.npz``, checksummed, atomic.
+
+::
+
+    run_dir/checkpoint/            the latest
+    │   ├── manifest.json          format version; sha256 and size of every other file (written last)
+    │   ├── agent.msgpack          the agent (``flax.serialization``: numbers and arrays only)
+    │   ├── state.json             step counters, the sampler's RNG state, running metric sums
+    │   └── buffer.npz             the online replay buffer (numeric arrays, read with allow_pickle=False)
+    run_dir/checkpoint.prev/       the one before it
+
+A checkpoint is written into a temporary directory, fsynced, and renamed into place; the
+previous one is kept.  Loading checks every file against the manifest: a damaged latest
+checkpoint falls back to the previous one with a one-line warning, and if none is usable the
+error names the file.  Nothing here unpickles: a ``state.pkl`` of older d5rl versions is
+refused, never opened.
+"""
+
+from __future__ import annotations
+
+import dataclasses
+import hashlib
+import io
+import json
+import os
+import shutil
+import sys
+from pathlib import Path
+from typing import Any
+
+import numpy as np
+
+from d5rl.errors import D5RLError
+
+FORMAT_VERSION = 1
+LATEST, PREVIOUS = "checkpoint", "checkpoint.prev"
+MANIFEST = "manifest.json"
+
+
+class CheckpointError(D5RLError):
+    """A checkpoint that is damaged, truncated, of an unknown format, or does not fit the run."""
+
+
+@dataclasses.dataclass
+class Checkpoint:
+    agent: bytes  # agent.to_bytes()
+    state: dict[str, Any]  # JSON-serializable loop state
+    buffer: dict[str, np.ndarray] | None = None  # ReplayBuffer.state_dict()
+    path: Path | None = None  # where it was read from
+
+
+def _sha256(data: bytes) -> str:
+    return hashlib.sha256(data).hexdigest()
+
+
+def _fsync_dir(path: Path) -> None:
+    try:
+        fd = os.open(path, os.O_RDONLY)
+    except OSError:
+        return
+    try:
+        os.fsync(fd)
+    except OSError:
+        pass
+    finally:
+        os.close(fd)
+
+
+def save_checkpoint(run_dir: str | Path, ckpt: Checkpoint) -> Path:
+    """Write ``run_dir/checkpoint`` atomically, keeping the one before as ``checkpoint.prev``."""
+    run_dir = Path(run_dir)
+    for stale in run_dir.glob(".checkpoint.tmp-*"):  # a killed writer's leftovers
+        shutil.rmtree(stale, ignore_errors=True)
+    tmp = run_dir / f".checkpoint.tmp-{os.getpid()}"
+    tmp.mkdir(parents=True)
+    files = {"agent.msgpack": bytes(ckpt.agent),
+             "state.json": (json.dumps(ckpt.state, sort_keys=True, allow_nan=False) + "\n").encode()}
+    if ckpt.buffer is not None:
+        bio = io.BytesIO()
+        np.savez(bio, **ckpt.buffer)
+        files["buffer.npz"] = bio.getvalue()
+    manifest = {"format_version": FORMAT_VERSION,
+                "files": {name: {"sha256": _sha256(data), "bytes": len(data)} for name, data in files.items()}}
+    files[MANIFEST] = (json.dumps(manifest, indent=1, sort_keys=True) + "\n").encode()
+    for name, data in files.items():
+        with open(tmp / name, "wb") as f:
+            f.write(data)
+            f.flush()
+            os.fsync(f.fileno())
+    _fsync_dir(tmp)
+    latest, previous = run_dir / LATEST, run_dir / PREVIOUS
+    if latest.exists():
+        shutil.rmtree(previous, ignore_errors=True)
+        latest.rename(previous)
+    tmp.rename(latest)
+    _fsync_dir(run_dir)
+    return latest
+
+
+def read_checkpoint(path: str | Path) -> Checkpoint:
+    """One checkpoint directory, every file checked against its manifest; :class:`CheckpointError` if not intact."""
+    path = Path(path)
+    if (path / "state.pkl").exists() and not (path / MANIFEST).exists():
+        raise CheckpointError(f"{path} is a pickle checkpoint of an older d5rl, which this version never opens "
+                              "(unpickling can run code)", "train again from scratch in a new --run-dir")
+    try:
+        manifest = json.loads((path / MANIFEST).read_bytes())
+    except FileNotFoundError:
+        raise CheckpointError(f"{path / MANIFEST} is missing (an incomplete checkpoint)") from None
+    except (OSError, ValueError) as e:
+        raise CheckpointError(f"{path / MANIFEST} is unreadable ({e.__class__.__name__})") from None
+    if not isinstance(manifest, dict) or manifest.get("format_version") != FORMAT_VERSION:
+        version = manifest.get("format_version") if isinstance(manifest, dict) else None
+        raise CheckpointError(f"{path} has checkpoint format {version!r}; this d5rl reads {FORMAT_VERSION}",
+                              "use the d5rl version that wrote it, or train again in a new --run-dir")
+    data: dict[str, bytes] = {}
+    for name, info in manifest.get("files", {}).items():
+        if "/" in name or name.startswith("."):
+            raise CheckpointError(f"{path / MANIFEST} names an unexpected file {name!r}")
+        try:
+            blob = (path / name).read_bytes()
+        except OSError:
+            raise CheckpointError(f"{path / name} is missing") from None
+        if len(blob) != info.get("bytes") or _sha256(blob) != info.get("sha256"):
+            raise CheckpointError(f"{path / name} is damaged (size or sha256 differs from its manifest)")
+        data[name] = blob
+    if "agent.msgpack" not in data or "state.json" not in data:
+        raise CheckpointError(f"{path / MANIFEST} lists no agent.msgpack or state.json")
+    try:
+        state = json.loads(data["state.json"])
+    except ValueError:
+        raise CheckpointError(f"{path / 'state.json'} is not valid JSON") from None
+    buffer = None
+    if "buffer.npz" in data:
+        try:
+            with np.load(io.BytesIO(data["buffer.npz"]), allow_pickle=False) as z:
+                buffer = {k: z[k] for k in z.files}
+        except (ValueError, OSError) as e:
+            raise CheckpointError(f"{path / 'buffer.npz'} is unreadable ({e})") from None
+    return Checkpoint(data["agent.msgpack"], state, buffer, path)
+
+
+def load_checkpoint(run_dir: str | Path, warn=None) -> Checkpoint | None:
+    """The newest intact checkpoint of a run, or None if it has none.
+
+    A damaged latest checkpoint falls back to the previous one with a one-line warning (to
+    ``warn``, default stderr); if every checkpoint present is damaged, :class:`CheckpointError`
+    names the first.
+    """
+    run_dir = Path(run_dir)
+    warn = warn or (lambda msg: print(f"warning: {msg}", file=sys.stderr))
+    first_error: CheckpointError | None = None
+    for name in (LATEST, PREVIOUS):
+        path = run_dir / name
+        if not path.exists():
+            continue
+        try:
+            ckpt = read_checkpoint(path)
+        except CheckpointError as e:
+            first_error = first_error or e
+            continue
+        if first_error is not None:
+            warn(f"{first_error.message}; using the previous checkpoint {path}")
+        return ckpt
+    if first_error is not None:
+        raise CheckpointError(first_error.message,
+                              first_error.hint or f"delete {run_dir}/checkpoint* to start over, or pick another --run-dir")
+    return None
+
+
+def restore_agent(agent, ckpt: Checkpoint):
+    """``agent.from_bytes`` with a one-line error when the saved agent does not fit this one."""
+    try:
+        return agent.from_bytes(ckpt.agent)
+    except Exception as e:  # noqa: BLE001 - msgpack/flax raise many types for a mismatched tree
+        raise CheckpointError(f"{ckpt.path / 'agent.msgpack'} does not fit this agent ({e.__class__.__name__}: "
+                              f"{str(e).splitlines()[0][:160] if str(e) else ''})",
+                              "the run's config.json and the checkpoint disagree; start a new --run-dir") from None

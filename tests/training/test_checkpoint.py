@@ -1,0 +1,137 @@
+"""Checkpoints never run code, are checked on load, and fall back to the previous one when damaged."""
+
+import json
+import os
+import pickle
+import subprocess
+import sys
+
+import jax
+import numpy as np
+import pytest
+
+from d5rl.training.checkpoint import (Checkpoint, CheckpointError, load_checkpoint, read_checkpoint,
+                                      save_checkpoint)
+from d5rl.training.loop import load_run, train
+from d5rl.training.toy import toy_dataset
+
+SMALL = ["hidden_dims=32,32", "batch_size=32", "eval_episodes=2", "eval_envs=2", "log_interval=16",
+         "progress=false", "tensorboard=false", "eval_interval=1000", "updates_per_call=8"]
+
+
+class _Payload:
+    """Unpickling this creates a marker file: what a crafted checkpoint would do with os.system."""
+
+    def __init__(self, marker):
+        self.marker = str(marker)
+
+    def __reduce__(self):
+        return (os.mkdir, (self.marker,))
+
+
+def _leaves(agent):
+    return [np.asarray(x) for x in jax.tree_util.tree_leaves(agent)]
+
+
+def _flip_byte(path, offset=None):
+    data = bytearray(path.read_bytes())
+    i = len(data) // 2 if offset is None else offset
+    data[i] ^= 0x01
+    path.write_bytes(bytes(data))
+
+
+def test_round_trip_keeps_previous(tmp_path):
+    buf = {"obs/": np.arange(6, dtype=np.float32).reshape(3, 2), "meta": np.array([3, 0, 8])}
+    save_checkpoint(tmp_path, Checkpoint(b"agent-1", {"step": 1, "rng": {"s": 2**100}}))
+    save_checkpoint(tmp_path, Checkpoint(b"agent-2", {"step": 2}, buf))
+    latest = load_checkpoint(tmp_path)
+    assert latest.agent == b"agent-2" and latest.state == {"step": 2}
+    np.testing.assert_array_equal(latest.buffer["obs/"], buf["obs/"])
+    prev = read_checkpoint(tmp_path / "checkpoint.prev")
+    assert prev.agent == b"agent-1" and prev.state["rng"]["s"] == 2**100 and prev.buffer is None
+    assert not list(tmp_path.glob(".checkpoint.tmp-*"))
+
+
+def test_flipped_byte_falls_back_to_previous_with_one_line_warning(tmp_path):
+    save_checkpoint(tmp_path, Checkpoint(b"agent-1", {"step": 1}))
+    save_checkpoint(tmp_path, Checkpoint(b"agent-2", {"step": 2}))
+    _flip_byte(tmp_path / "checkpoint" / "agent.msgpack", 0)
+    warnings = []
+    ckpt = load_checkpoint(tmp_path, warn=warnings.append)
+    assert ckpt.state == {"step": 1} and ckpt.agent == b"agent-1"
+    assert len(warnings) == 1 and "\n" not in warnings[0]
+    assert "agent.msgpack is damaged" in warnings[0] and "checkpoint.prev" in warnings[0]
+
+
+@pytest.mark.parametrize("damage", ["truncate", "flip", "no_manifest", "format"])
+def test_unusable_checkpoints_get_an_error_naming_the_file(tmp_path, damage):
+    save_checkpoint(tmp_path, Checkpoint(b"agent-1" * 100, {"step": 1}))
+    d = tmp_path / "checkpoint"
+    if damage == "truncate":
+        (d / "agent.msgpack").write_bytes((d / "agent.msgpack").read_bytes()[:50])
+    elif damage == "flip":
+        _flip_byte(d / "state.json")
+    elif damage == "no_manifest":
+        (d / "manifest.json").unlink()
+    else:
+        m = json.loads((d / "manifest.json").read_text())
+        m["format_version"] = 99
+        (d / "manifest.json").write_text(json.dumps(m))
+    with pytest.raises(CheckpointError) as e:
+        load_checkpoint(tmp_path)
+    assert str(d) in e.value.message and "\n" not in e.value.message
+
+
+def _write_pickle_checkpoint(d, marker):
+    d.mkdir(parents=True, exist_ok=True)
+    (d / "state.pkl").write_bytes(pickle.dumps({"step": 0, "agent": _Payload(marker)}))
+
+
+def test_crafted_pickle_is_never_opened_by_train_or_eval(tmp_path):
+    ds = toy_dataset(10)
+    run = tmp_path / "run"
+    train("bc", "toy-reach-v0", 16, 0, 0, SMALL + ["checkpoint_interval=8"], run, dataset=ds)
+    marker = tmp_path / "pwned"
+    for name in ("checkpoint", "checkpoint.prev"):
+        import shutil
+
+        shutil.rmtree(run / name)
+        _write_pickle_checkpoint(run / name, marker)
+    with pytest.raises(CheckpointError, match="pickle"):
+        train("bc", "toy-reach-v0", 16, 0, 0, SMALL + ["checkpoint_interval=8"], run, dataset=ds)
+    with pytest.raises(CheckpointError, match="pickle"):
+        load_run(run)
+    proc = subprocess.run([sys.executable, "-m", "d5rl.cli", "eval", str(run), "--episodes", "1"],
+                          capture_output=True, text=True, timeout=300)
+    assert proc.returncode == 2 and "Traceback" not in proc.stderr
+    assert proc.stderr.startswith("error: ") and "pickle" in proc.stderr.splitlines()[0]
+    assert not marker.exists()
+
+
+def test_pickle_bytes_in_the_new_format_do_not_run(tmp_path):
+    """Even with a matching manifest, agent bytes go through msgpack, which builds data, not objects."""
+    ds = toy_dataset(10)
+    run = tmp_path / "run"
+    train("bc", "toy-reach-v0", 8, 0, 0, SMALL + ["checkpoint_interval=8"], run, dataset=ds)
+    marker = tmp_path / "pwned"
+    ckpt = load_checkpoint(run)
+    save_checkpoint(run, Checkpoint(pickle.dumps(_Payload(marker)), ckpt.state))
+    with pytest.raises(CheckpointError, match="does not fit this agent"):
+        load_run(run)
+    assert not marker.exists()
+
+
+def test_damaged_latest_checkpoint_resumes_from_previous_and_matches(tmp_path, capsys):
+    ds = toy_dataset(20)
+    kw = SMALL + ["checkpoint_interval=16"]
+    full = train("td3bc", "toy-reach-v0", 64, 0, 1, kw, tmp_path / "a", dataset=ds)
+    with pytest.raises(KeyboardInterrupt):
+        train("td3bc", "toy-reach-v0", 64, 0, 1, kw, tmp_path / "b", dataset=ds, _stop_at=48)
+    assert json.loads((tmp_path / "b" / "checkpoint" / "state.json").read_text())["step"] == 48
+    _flip_byte(tmp_path / "b" / "checkpoint" / "agent.msgpack")
+    capsys.readouterr()
+    resumed = train("td3bc", "toy-reach-v0", 64, 0, 1, kw, tmp_path / "b", dataset=ds)
+    err = capsys.readouterr().err
+    assert "warning:" in err and "using the previous checkpoint" in err
+    for a, b in zip(_leaves(full["agent"]), _leaves(resumed["agent"])):
+        np.testing.assert_array_equal(a, b)
