@@ -1,12 +1,9 @@
 #!/usr/bin/env bash
 # Install d5rl, generate a small A1 dataset, train BC on it briefly and print its normalized score.
-# About 10 minutes on a 2-core laptop; everything lands in ./runs and ~/.cache/d5rl ($D5RL_HOME).
+# About 10 minutes on a 2-core laptop; everything lands in ./.venv, ./runs and ~/.cache/d5rl ($D5RL_HOME).
 set -euo pipefail
 cd "$(dirname "$0")/.."
-python -m pip install -q --upgrade pip
-python -m pip install -q -e ".[train]"
-d5rl install-assets
-export MUJOCO_GL="${MUJOCO_GL:-egl}"
+source scripts/install.sh train   # .venv with locked versions + robot-model assets
 
 EPISODES="${EPISODES:-48}"
 d5rl generate a1-walk-v0 --episodes "$EPISODES"     # the first 48 episodes of the full dataset

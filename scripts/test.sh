@@ -1,10 +1,7 @@
 #!/usr/bin/env bash
-# Install d5rl with its test extras and the robot-model packages, then run the default test suite.
+# Install d5rl with its test extras into a virtualenv (.venv, every package at its locked version) and the
+# robot-model assets, then run the default test suite (extra arguments go to pytest).
 set -euo pipefail
 cd "$(dirname "$0")/.."
-python -m pip install -q --upgrade pip
-# torch (cached CPU wheel) is only the plain baseline of bench/agents.py; d5rl itself never needs it.
-python -m pip install -q -e ".[train,test]"
-d5rl install-assets
-export MUJOCO_GL="${MUJOCO_GL:-egl}"
+source scripts/install.sh train,test
 python -m pytest -n 2 -q "$@"
