@@ -68,7 +68,7 @@ def main() -> None:
         parts: dict[str, list] = {}
         for s in range(0, len(eps), 16):
             arrays, aligns = _concat(eps[s: s + 16])
-            w = ShardWriter(tmp.name, s // 16)
+            w = ShardWriter(tmp.name, s // 16, lock_root=tmp.name)
             for k, v in arrays.items():
                 w.write(k, v)
             w.commit({}, aligns)

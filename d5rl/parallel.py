@@ -12,17 +12,27 @@ job per shard through :func:`run_jobs`; the backend is chosen by ``workers``:
 
 Jobs report progress with :func:`report` (any picklable payload, e.g. one finished
 episode); the driver receives it through ``on_message`` whatever the backend.
+
+Stopping: on Ctrl-C or an error the driver terminates its pool workers at once (they ignore
+SIGINT, so a Ctrl-C to the whole process group is handled by the driver alone), and a worker
+whose driver dies, even by ``kill -9``, exits by itself (``PR_SET_PDEATHSIG`` on Linux and a
+watchdog thread everywhere), so no orphan keeps writing.
 """
 
 from __future__ import annotations
 
+import contextlib
 import hashlib
 import multiprocessing as mp
 import os
 import pickle
 import queue as queue_mod
+import signal
+import sys
+import threading
+import time
+import traceback
 import uuid
-from concurrent.futures import FIRST_COMPLETED, ProcessPoolExecutor, wait
 from dataclasses import dataclass
 from pathlib import Path
 from typing import Any, Callable, Sequence
@@ -41,6 +51,35 @@ class Ray:
 
 Workers = int | Ray | None
 
+
+def check_workers(workers: Workers) -> None:
+    """One-line error for a worker count that is not a positive integer (None = all cores)."""
+    if workers is None or isinstance(workers, Ray):
+        return
+    if isinstance(workers, bool) or not isinstance(workers, int) or workers < 1:
+        raise D5RLError(f"workers must be a positive number of processes, got {workers!r}",
+                        "omit --workers to use every core, or pass --workers 1 to run in this process")
+
+
+def die_with_parent(parent_pid: int | None = None) -> None:
+    """Make this process exit when its parent dies, however it dies (no orphans)."""
+    parent_pid = os.getppid() if parent_pid is None else parent_pid
+    if sys.platform.startswith("linux"):
+        with contextlib.suppress(Exception):
+            import ctypes
+
+            ctypes.CDLL("libc.so.6", use_errno=True).prctl(1, int(signal.SIGKILL))  # PR_SET_PDEATHSIG
+    if os.getppid() != parent_pid:  # the parent died before the line above took effect
+        os._exit(1)
+
+    def watch():
+        while True:
+            time.sleep(0.5)
+            if os.getppid() != parent_pid:
+                os._exit(1)
+
+    threading.Thread(target=watch, daemon=True, name="d5rl-parent-watchdog").start()
+
 # --- worker side: where report() sends to --------------------------------------------------------------
 _SINK: Callable[[Any], None] | None = None
 _INITIALIZED: set[str] = set()
@@ -52,19 +91,42 @@ def report(payload: Any) -> None:
         _SINK(payload)
 
 
-def _init_pool_worker(q, initializer, initargs) -> None:
+def _pool_worker(tasks, results, fn, initializer, initargs, parent_pid: int) -> None:
+    """A pool process: run jobs from ``tasks`` until the ``None`` sentinel; report to ``results``."""
     global _SINK
+    signal.signal(signal.SIGINT, signal.SIG_IGN)  # the driver decides what Ctrl-C means
+    die_with_parent(parent_pid)
     # one process per core: keep numerical libraries from starting a thread per core each
     for var in ("OMP_NUM_THREADS", "MKL_NUM_THREADS", "OPENBLAS_NUM_THREADS"):
         os.environ[var] = "1"
     add_xla_flags(*SINGLE_THREAD)
-    _SINK = q.put
-    if initializer is not None:
-        initializer(*initargs)
+    _SINK = lambda payload: results.put(("msg", None, payload))  # noqa: E731
+    try:
+        if initializer is not None:
+            initializer(*initargs)
+    except BaseException as e:  # noqa: BLE001 - reported to the driver
+        results.put(("error", None, _portable_error(e)))
+        return
+    while (item := tasks.get()) is not None:
+        i, job = item
+        try:
+            results.put(("done", i, fn(*job)))
+        except BaseException as e:  # noqa: BLE001 - reported to the driver
+            results.put(("error", i, _portable_error(e)))
+            return
 
 
-def _call(fn, job):
-    return fn(*job)
+class RemoteTraceback(Exception):
+    """The traceback of an exception raised in a worker process (attached as ``__cause__``)."""
+
+
+def _portable_error(e: BaseException) -> tuple[BaseException | None, str]:
+    tb = "".join(traceback.format_exception(type(e), e, e.__traceback__))
+    try:
+        pickle.loads(pickle.dumps(e))
+        return e, tb
+    except Exception:  # noqa: BLE001 - an exception that does not survive pickling
+        return None, tb
 
 
 def _ray_job(fn, job, initializer, initargs, q, check_file: str | None):
@@ -107,6 +169,7 @@ def run_jobs(
     each job finishes, so a caller can record progress that survives a later failure.
     ``shared_dir`` is a directory the jobs write to; on Ray every node must see it.
     """
+    check_workers(workers)
     jobs = list(jobs)
     results: list = [None] * len(jobs)
     if not jobs:
@@ -152,23 +215,49 @@ def _drain(q, on_message, get) -> None:
 
 def _run_pool(fn, jobs, n, initializer, initargs, on_message, settle) -> None:
     ctx = mp.get_context("spawn")  # fork is unsafe with JAX / OpenGL state in the parent
-    with ctx.Manager() as manager:
-        q = manager.Queue()
-        with ProcessPoolExecutor(n, mp_context=ctx, initializer=_init_pool_worker,
-                                 initargs=(q, initializer, initargs)) as pool:
-            futures = {pool.submit(_call, fn, job): i for i, job in enumerate(jobs)}
-            remaining = set(futures)
+    tasks, results = ctx.SimpleQueue(), ctx.Queue()
+    for i, job in enumerate(jobs):
+        tasks.put((i, job))
+    for _ in range(n):
+        tasks.put(None)
+    procs = [ctx.Process(target=_pool_worker, args=(tasks, results, fn, initializer, initargs, os.getpid()),
+                         daemon=True, name=f"d5rl-worker-{k}") for k in range(n)]
+    for p in procs:
+        p.start()
+    remaining = set(range(len(jobs)))
+    try:
+        while remaining:
             try:
-                while remaining:
-                    finished, remaining = wait(remaining, timeout=0.25, return_when=FIRST_COMPLETED)
-                    _drain(q, on_message, q.get_nowait)
-                    for fut in finished:
-                        settle(futures[fut], fut.result())
-                _drain(q, on_message, q.get_nowait)
-            except BaseException:
-                for fut in remaining:
-                    fut.cancel()
-                raise
+                kind, i, payload = results.get(timeout=0.25)
+            except queue_mod.Empty:
+                dead = [p for p in procs if p.exitcode not in (None, 0)]
+                if dead:
+                    raise D5RLError(f"a worker process died (exit code {dead[0].exitcode}) before finishing its job",
+                                    "look for an out-of-memory kill (dmesg); run the same command again to resume")
+                continue
+            if kind == "msg":
+                if on_message is not None:
+                    on_message(payload)
+            elif kind == "done":
+                remaining.discard(i)
+                settle(i, payload)
+            else:
+                exc, tb = payload
+                if exc is None:
+                    raise RuntimeError(f"a worker failed:\n{tb}")
+                raise exc from RemoteTraceback(tb)
+    finally:
+        for p in procs:
+            if p.is_alive():
+                p.terminate()
+        for p in procs:
+            p.join(timeout=5)
+            if p.is_alive():
+                p.kill()
+                p.join()
+        results.close()
+    # Each worker sends its progress messages before its result, through one queue, so when the
+    # last result has arrived no message is still on its way.
 
 
 def import_ray():

@@ -22,24 +22,34 @@ Shards are written into a temporary sibling directory and renamed into place,
 so a killed writer never leaves a half shard behind, and generation resumes at
 the first missing shard.  Every byte is a function of (dataset version,
 generator version, seed): no timestamps, hostnames or paths are stored.
+
+Integrity: every array's sha256 is in its ``shard.json`` and the manifest.  Loading
+re-hashes a shard only when its files changed since they were last verified:
+``.verified.json`` in the shard remembers each file's size, mtime, ctime and inode
+at the last successful check (the writer stores it when it commits, so fresh data
+loads without a re-hash).  ``d5rl verify`` re-hashes everything regardless.
 """
 
 from __future__ import annotations
 
+import errno
 import hashlib
 import json
 import os
 import shutil
+import socket
 from pathlib import Path
 from typing import Any, Iterable
 
 import numpy as np
 
-from d5rl.errors import DatasetCorruptError, DatasetVersionError
+from d5rl.datasets import lock
+from d5rl.errors import D5RLError, DatasetCorruptError, DatasetVersionError
 
 FORMAT_VERSION = 1
 MANIFEST = "manifest.json"
 SHARD_META = "shard.json"
+STAMP = ".verified.json"
 _HASH_CHUNK = 1 << 22
 
 
@@ -67,7 +77,7 @@ def sha256_file(path: Path) -> str:
 
 def dump_json(obj: Any, path: Path) -> None:
     """Deterministic JSON (sorted keys), written atomically."""
-    tmp = path.with_name(path.name + f".tmp-{os.getpid()}")
+    tmp = path.with_name(path.name + f".tmp-{owner_tag()}")
     with open(tmp, "w") as f:
         json.dump(obj, f, indent=1, sort_keys=True, default=_json_default)
         f.write("\n")
@@ -97,7 +107,70 @@ def load_json(path: Path, what: str) -> dict:
 
 
 def _regen_hint(path: Path) -> str:
-    return f"delete {path.parent} (or run `d5rl generate TASK --force`) and regenerate"
+    return "run `d5rl generate TASK`: it regenerates missing or damaged shards and keeps the intact ones"
+
+
+def read_manifest(path: Path) -> dict:
+    """``manifest.json``; :class:`DatasetVersionError` for a format this d5rl does not read."""
+    manifest = load_json(path, "manifest")
+    if not isinstance(manifest, dict) or manifest.get("format_version") != FORMAT_VERSION:
+        found = manifest.get("format_version") if isinstance(manifest, dict) else None
+        raise DatasetVersionError(
+            f"{path} has format version {found!r}, this d5rl reads version {FORMAT_VERSION}",
+            "use the d5rl version that wrote it, or regenerate: `d5rl generate TASK --force`",
+        )
+    return manifest
+
+
+# --- temporaries: named after their owner, removed only when the owner is gone -----------------------------
+def owner_tag() -> str:
+    """``<host>-<pid>-<random>``: unique per writer, and says which process to ask whether it is alive."""
+    return f"{socket.gethostname()}-{os.getpid()}-{os.urandom(4).hex()}"
+
+
+def _owner_alive(name: str) -> bool:
+    """Whether the process that made ``.<x>.tmp-<host>-<pid>-<random>`` may still be writing it."""
+    tag = name.rsplit(".tmp-", 1)[-1] if ".tmp-" in name else name.rsplit(".old-", 1)[-1]
+    parts = tag.rsplit("-", 2)
+    if len(parts) != 3 or not parts[1].isdigit():
+        return False
+    host, pid = parts[0], int(parts[1])
+    if host != socket.gethostname():
+        return True  # another node's worker (Ray): cannot tell, leave it
+    try:
+        os.kill(pid, 0)
+    except ProcessLookupError:
+        return False
+    except PermissionError:
+        return True
+    return True
+
+
+def disk_full_error(path: Path, exc: OSError) -> D5RLError | None:
+    """A one-line error for a write that failed because the disk is full (numpy's short writes
+    carry no errno, so the free space decides); None if the disk is not the cause."""
+    try:
+        free = shutil.disk_usage(path if path.exists() else path.parent).free
+    except OSError:
+        free = None
+    if getattr(exc, "errno", None) == errno.ENOSPC or (free is not None and free < 64 << 20):
+        where = f" ({free / 2**20:.0f} MiB free)" if free is not None else ""
+        return D5RLError(f"the disk holding {path} is full{where}",
+                         "free some space or point D5RL_HOME at a bigger disk, then run the same command again "
+                         "(finished shards are kept)")
+    return None
+
+
+def ensure_writable(path: Path) -> None:
+    """Create ``path`` and check that files can be written there, before any work starts."""
+    probe = Path(path) / f".write-test-{owner_tag()}"
+    try:
+        Path(path).mkdir(parents=True, exist_ok=True)
+        probe.touch()
+        probe.unlink()
+    except OSError as e:
+        raise D5RLError(f"cannot write to {path} ({e.strerror or e})",
+                        "set D5RL_HOME to a writable directory (datasets go to $D5RL_HOME/datasets)") from None
 
 
 class ShardWriter:
@@ -107,11 +180,12 @@ class ShardWriter:
     memory-mapped file (:meth:`open`) for data larger than RAM.
     """
 
-    def __init__(self, root: Path, index: int):
+    def __init__(self, root: Path, index: int, lock_root: Path | None = None):
         self.root = Path(root)
+        self.lock_root = Path(lock_root) if lock_root is not None else self.root.parent  # <dataset>/shards -> <dataset>
         self.index = index
         self.final = self.root / shard_name(index)
-        self.tmp = self.root / f".{shard_name(index)}.tmp-{os.getpid()}"
+        self.tmp = self.root / f".{shard_name(index)}.tmp-{owner_tag()}"
         if self.tmp.exists():
             shutil.rmtree(self.tmp)
         self.tmp.mkdir(parents=True)
@@ -144,9 +218,15 @@ class ShardWriter:
         for p in self.tmp.iterdir():  # make the data durable before the rename publishes it
             with open(p, "rb") as f:
                 os.fsync(f.fileno())
-        if self.final.exists():
-            shutil.rmtree(self.final)
-        os.rename(self.tmp, self.final)
+        write_stamp(self.tmp, record)  # just hashed: file stats survive the rename below
+        old = None
+        with lock.publishing(self.lock_root):  # no reader is opening shards meanwhile
+            if self.final.exists():
+                old = self.root / f".{self.final.name}.old-{owner_tag()}"
+                os.rename(self.final, old)
+            os.rename(self.tmp, self.final)
+        if old is not None:
+            shutil.rmtree(old, ignore_errors=True)
         return record
 
     def abort(self) -> None:
@@ -154,13 +234,15 @@ class ShardWriter:
 
 
 def clean_temporaries(root: Path) -> int:
-    """Remove leftovers of killed writers (``.shard-*.tmp-*``) and of killed Ray runs'
-    shared-directory checks (``.ray-check-*``); return how many."""
+    """Remove leftovers of dead writers (``.shard-*.tmp-*``, ``.shard-*.old-*``; a live owner's are
+    kept) and of killed Ray runs' shared-directory checks (``.ray-check-*``); return how many.
+    Callers hold the dataset's write lock, so no other run is using them."""
     n = 0
     if root.exists():
-        for p in root.glob(".shard-*.tmp-*"):
-            shutil.rmtree(p, ignore_errors=True)
-            n += 1
+        for p in [*root.glob(".shard-*.tmp-*"), *root.glob(".shard-*.old-*")]:
+            if not _owner_alive(p.name):
+                shutil.rmtree(p, ignore_errors=True)
+                n += 1
         for p in root.glob(".ray-check-*"):
             p.unlink(missing_ok=True)
             n += 1
@@ -195,8 +277,7 @@ def open_array(shard_dir: Path, info: dict, mmap: bool = True) -> np.ndarray:
 
 
 def verify_shard(shard_dir: Path, expected: dict | None = None) -> list[str]:
-    """Problems found in one shard (empty list = intact): missing files, wrong checksums."""
-    problems = []
+    """Problems found in one shard by re-hashing every array (empty list = intact)."""
     try:
         record = read_shard_record(shard_dir)
     except FileNotFoundError:
@@ -204,8 +285,13 @@ def verify_shard(shard_dir: Path, expected: dict | None = None) -> list[str]:
     except (DatasetCorruptError, DatasetVersionError) as e:
         return [f"{shard_dir}: {e.message}"]
     if expected is not None and expected.get("arrays") != record.get("arrays"):
-        problems.append(f"{shard_dir}: {SHARD_META} disagrees with the manifest")
-    for key, info in record["arrays"].items():
+        return [f"{shard_dir}: {SHARD_META} disagrees with the manifest"]
+    return _hash_check(shard_dir, record)
+
+
+def _hash_check(shard_dir: Path, record: dict) -> list[str]:
+    problems = []
+    for info in record["arrays"].values():
         path = shard_dir / info["file"]
         if not path.exists():
             problems.append(f"{path}: missing")
@@ -213,7 +299,54 @@ def verify_shard(shard_dir: Path, expected: dict | None = None) -> list[str]:
         digest = sha256_file(path)
         if digest != info["sha256"]:
             problems.append(f"{path}: checksum mismatch (expected {info['sha256'][:12]}…, got {digest[:12]}…)")
+    if not problems:
+        write_stamp(shard_dir, record)
     return problems
+
+
+# --- verify once, remember by file stats ------------------------------------------------------------------
+_STAMP_MEMO: dict[str, dict] = {}  # for read-only datasets, where the stamp file cannot be written
+
+
+def _file_stats(shard_dir: Path, record: dict) -> dict[str, list[int]]:
+    out = {}
+    for name in sorted([info["file"] for info in record["arrays"].values()] + [SHARD_META]):
+        st = os.stat(shard_dir / name)
+        out[name] = [st.st_size, st.st_mtime_ns, st.st_ctime_ns, st.st_ino]
+    return out
+
+
+def write_stamp(shard_dir: Path, record: dict) -> None:
+    """Remember that ``shard_dir``'s files, as they are now, match ``record``'s checksums."""
+    try:
+        stats = _file_stats(shard_dir, record)
+    except OSError:
+        return
+    _STAMP_MEMO[str(shard_dir.resolve())] = stats
+    try:
+        tmp = shard_dir / f"{STAMP}.tmp-{owner_tag()}"
+        tmp.write_text(json.dumps(stats, sort_keys=True))
+        os.replace(tmp, shard_dir / STAMP)
+    except OSError:
+        pass  # read-only dataset: the in-process memo still spares re-hashing within this process
+
+
+def check_shard(shard_dir: Path, record: dict) -> list[str]:
+    """Problems of one shard against ``record`` (empty = intact), re-hashing only files whose
+    size, mtime, ctime or inode changed since they were last verified."""
+    try:
+        stats = _file_stats(shard_dir, record)
+    except FileNotFoundError as e:
+        return [f"{e.filename}: missing"]
+    known = _STAMP_MEMO.get(str(shard_dir.resolve()))
+    if known != stats:
+        try:
+            known = json.loads((shard_dir / STAMP).read_text())
+        except (OSError, ValueError):
+            known = None
+    if known == stats:
+        return []
+    return _hash_check(shard_dir, record)
 
 
 def iter_shard_dirs(root: Path) -> Iterable[Path]:

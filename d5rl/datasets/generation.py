@@ -13,6 +13,7 @@ more episodes later extends it.
 from __future__ import annotations
 
 import shutil
+import sys
 import time
 from pathlib import Path
 
@@ -21,9 +22,12 @@ from tqdm.auto import tqdm
 
 from d5rl import parallel, paths
 from d5rl.datasets import format as fmt
+from d5rl.datasets import lock
 from d5rl.datasets.episode import Episode
 from d5rl.errors import D5RLError, DatasetVersionError
 from d5rl.registry import DatasetSpec, TaskSpec, get_spec, resolve
+
+MAX_SEED = 2**63 - 1
 
 
 def dataset_root(dspec: DatasetSpec, seed: int | None = None) -> Path:
@@ -36,6 +40,25 @@ def dataset_spec(task: str | TaskSpec) -> DatasetSpec:
     if spec.dataset is None:
         raise D5RLError(f"task {spec.id} has no offline dataset")
     return spec.dataset
+
+
+def check_seed(seed) -> int:
+    """A dataset seed, checked before any work: an integer in [0, 2**63)."""
+    if isinstance(seed, bool) or not isinstance(seed, (int, np.integer)) or not 0 <= int(seed) <= MAX_SEED:
+        raise D5RLError(f"dataset seed must be an integer in [0, 2**63), got {seed!r}",
+                        "omit --seed to use the task's default seed (0)")
+    return int(seed)
+
+
+def check_episodes(episodes, dspec: DatasetSpec) -> int:
+    """A number of episodes, checked before any work: 1 ..= the dataset's full size."""
+    if episodes is None:
+        return dspec.num_episodes
+    if isinstance(episodes, bool) or not isinstance(episodes, (int, np.integer)) \
+            or not 1 <= int(episodes) <= dspec.num_episodes:
+        raise D5RLError(f"{dspec.name} has {dspec.num_episodes} episodes; {episodes!r} were asked for",
+                        f"ask for 1 to {dspec.num_episodes} episodes (omit --episodes for all of them)")
+    return int(episodes)
 
 
 def episode_rng(seed: int, index: int) -> np.random.Generator:
@@ -154,37 +177,54 @@ def generate(
     force: bool = False,
     progress: bool = True,
 ) -> Path:
-    """Generate (or finish, or extend) a task's dataset; return its directory.
+    """Generate, finish, extend or repair a task's dataset; return its directory.
 
-    Already-complete shards are kept, so calling this after an interruption
-    continues where the last run stopped.  ``force`` deletes what is there first.
+    Intact shards are kept (checked by checksum, or by file stats since their last check), so
+    calling this after an interruption continues where the last run stopped, and missing or
+    damaged shards of a finished dataset are regenerated (deterministically: the same bytes).
+    ``force`` deletes what is there first.  One process writes a dataset at a time: a second
+    call waits for the first, then finds its work done.
     """
     spec = get_spec(task)
     dspec = dataset_spec(spec)
-    seed = dspec.default_seed if seed is None else int(seed)
-    num_episodes = dspec.num_episodes if num_episodes is None else int(num_episodes)
-    if num_episodes < 1:
-        raise D5RLError(f"num_episodes must be >= 1, got {num_episodes}")
+    seed = check_seed(dspec.default_seed if seed is None else seed)
+    num_episodes = check_episodes(num_episodes, dspec)
+    parallel.check_workers(workers)
     root = dataset_root(dspec, seed)
-    if force and root.exists():
-        shutil.rmtree(root)
+    fmt.ensure_writable(root)
+    with lock.writing(root):
+        try:
+            return _generate_locked(spec, dspec, seed, num_episodes, root, workers, force, progress)
+        except OSError as e:
+            full = fmt.disk_full_error(root, e)
+            if full is not None:
+                raise full from None
+            raise
+
+
+def _generate_locked(spec, dspec, seed, num_episodes, root, workers, force, progress) -> Path:
     shards_dir = root / "shards"
+    if force:
+        with lock.publishing(root):
+            (root / fmt.MANIFEST).unlink(missing_ok=True)
+            for sub in ("shards", "renders"):
+                shutil.rmtree(root / sub, ignore_errors=True)
     shards_dir.mkdir(parents=True, exist_ok=True)
     fmt.clean_temporaries(shards_dir)
 
     generator_version = str(resolve(dspec.generator).version)
     ident = _identity(dspec, seed, generator_version)
     manifest_path = root / fmt.MANIFEST
+    manifest = None
     if manifest_path.exists():
-        manifest = fmt.load_json(manifest_path, "manifest")
+        manifest = fmt.read_manifest(manifest_path)
         _check_identity(manifest, ident, root)
-        if manifest["num_episodes"] >= num_episodes:
-            return root
-        manifest_path.unlink()  # about to extend: the dataset is incomplete until the new manifest lands
+    have = manifest["num_episodes"] if manifest is not None else 0
+    target = max(num_episodes, have)  # never shrink what the manifest already promises
 
-    plan = shard_plan(num_episodes, dspec.episodes_per_shard)
+    plan = shard_plan(target, dspec.episodes_per_shard)
     records: dict[int, dict] = {}
-    pending = []
+    pending, repairs = [], []
     for index, (start, stop) in enumerate(plan):
         shard_dir = shards_dir / fmt.shard_name(index)
         if shard_dir.exists():
@@ -195,14 +235,26 @@ def generate(
             if rec is not None:
                 _check_identity(rec, ident, shard_dir)
                 if rec["episodes"] == [start, stop]:
-                    records[index] = rec
-                    continue
+                    problems = fmt.check_shard(shard_dir, rec)
+                    if not problems:
+                        records[index] = rec
+                        continue
+                    repairs.append(f"{shard_dir.name} ({problems[0].rsplit('/', 1)[-1]})")
+            elif stop <= have:
+                repairs.append(f"{shard_dir.name} (unreadable {fmt.SHARD_META})")
+        elif stop <= have:
+            repairs.append(f"{shard_dir.name} (missing)")
         pending.append((index, start, stop))
     # Shards beyond the plan belong to a larger earlier request; they stay valid and are kept.
+    if not pending and have == target:
+        return root
+    if repairs:
+        print(f"repairing {len(repairs)} damaged or missing shard(s) of {dspec.name}: {', '.join(repairs[:5])}"
+              + (" ..." if len(repairs) > 5 else ""), file=sys.stderr, flush=True)
 
     done_eps = sum(stop - start for i, (start, stop) in enumerate(plan) if i in records)
     bar = tqdm(
-        total=num_episodes, initial=done_eps, unit="ep", desc=f"generate {dspec.name}",
+        total=target, initial=done_eps, unit="ep", desc=f"generate {dspec.name}",
         disable=not progress, dynamic_ncols=True,
     )
     t0, transitions = time.perf_counter(), 0
@@ -224,8 +276,9 @@ def generate(
         )
     finally:
         bar.close()
+        fmt.clean_temporaries(shards_dir)  # workers are gone: remove what an interrupted one left
 
-    write_manifest(root, dspec, ident, [records[i] for i in range(len(plan))], num_episodes)
+    write_manifest(root, dspec, ident, [records[i] for i in range(len(plan))], target)
     return root
 
 
@@ -244,5 +297,6 @@ def write_manifest(root: Path, dspec: DatasetSpec, ident: dict, records: list[di
         "shards": [{k: r[k] for k in ("name", "episodes", "arrays")} for r in records],
         "packages": fmt.package_versions(),
     }
-    fmt.dump_json(manifest, root / fmt.MANIFEST)
+    with lock.publishing(root):  # replaces the old manifest (if extending) in one step
+        fmt.dump_json(manifest, root / fmt.MANIFEST)
     return manifest

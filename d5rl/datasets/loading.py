@@ -11,6 +11,7 @@ of episode ``e`` observes step ``i + e`` and lands in step ``i + e + 1``.
 
 from __future__ import annotations
 
+import sys
 import warnings
 from pathlib import Path
 from typing import Any, Iterator, Mapping
@@ -18,8 +19,9 @@ from typing import Any, Iterator, Mapping
 import numpy as np
 
 from d5rl.datasets import format as fmt
+from d5rl.datasets import lock
 from d5rl.datasets.episode import Episode
-from d5rl.errors import DatasetCorruptError, DatasetNotFoundError
+from d5rl.errors import D5RLError, DatasetCorruptError, DatasetNotFoundError
 from d5rl.registry import TaskSpec, get_spec, resolve
 
 # Arrays at most this large are read into RAM by default (fast sampling);
@@ -324,6 +326,23 @@ def _shard_chunks(shard_dirs: list[Path], records: list[dict], n_eps_last: int |
     return chunks, aligns
 
 
+def _extends(rec: dict, entry: dict, manifest: dict) -> bool:
+    """Whether ``rec`` is the manifest's last, partial shard already rewritten by a generator that is
+    extending the dataset: same generator and seed, same first episode, more episodes.  Generation is
+    deterministic, so the episodes the manifest promises are the same bytes in it."""
+    same = all(rec.get(k) == manifest.get(k) for k in
+               ("dataset", "dataset_version", "generator", "generator_version", "generator_kwargs", "seed"))
+    return same and rec["episodes"][0] == entry["episodes"][0] and rec["episodes"][1] > entry["episodes"][1]
+
+
+class _NotReady(Exception):
+    """Internal: the data on disk cannot be served as asked (missing, too short, or damaged)."""
+
+    def __init__(self, error: D5RLError, damaged: bool = False):
+        super().__init__(error.message)
+        self.error, self.damaged = error, damaged
+
+
 def load_dataset(
     task: str | TaskSpec,
     *,
@@ -343,70 +362,104 @@ def load_dataset(
     array memory-mapped, "auto" reads arrays up to 1 GiB.  Extra keyword arguments
     go to the dataset's derived-cache builder (e.g. ``cameras=``, ``size=`` for
     rendered frames).
+
+    Every shard used is checked against its checksums before any array is handed out
+    (re-hashed only if its files changed since the last check; see
+    :func:`d5rl.datasets.format.check_shard`).  A damaged or missing shard is regenerated
+    when ``generate`` is true (with a one-line warning), else raises
+    :class:`~d5rl.errors.DatasetCorruptError`.
     """
     from d5rl.datasets import generation
 
     spec = get_spec(task)
     dspec = generation.dataset_spec(spec)
-    seed = dspec.default_seed if seed is None else int(seed)
+    seed = generation.check_seed(dspec.default_seed if seed is None else seed)
+    wanted = generation.check_episodes(episodes, dspec)
     root = generation.dataset_root(dspec, seed)
-    manifest_path = root / fmt.MANIFEST
-    wanted = dspec.num_episodes if episodes is None else int(episodes)
-
-    have = fmt.load_json(manifest_path, "manifest")["num_episodes"] if manifest_path.exists() else 0
-    if have < wanted:
-        if not generate and (have == 0 or episodes is not None):
-            raise DatasetNotFoundError(
-                f"dataset {dspec.name} (seed {seed}) has {have} of the {wanted} episodes asked for in {root}",
-                f"run `d5rl generate {spec.id}" + (f" --episodes {wanted}`" if episodes else "`"),
-            )
-        if generate:
-            generation.generate(spec, seed=seed, num_episodes=wanted, workers=workers, progress=progress)
-    manifest = fmt.load_json(manifest_path, "manifest")
-    if manifest["num_episodes"] < dspec.num_episodes and episodes is None:
-        warnings.warn(
-            f"{dspec.name} has only {manifest['num_episodes']} of its {dspec.num_episodes} episodes "
-            f"(generated with --episodes); run `d5rl generate {spec.id}` for the full dataset or pass generate=True",
-            stacklevel=2,
-        )
-    generation.check_current(manifest, dspec, seed, root)
-
-    n = min(wanted, manifest["num_episodes"])
-    shard_dirs, records = [], []
-    for entry in manifest["shards"]:
-        if entry["episodes"][0] >= n:
-            break
-        d = root / "shards" / entry["name"]
+    if episodes is None and not generate and (root / fmt.MANIFEST).exists():
+        wanted = min(wanted, fmt.read_manifest(root / fmt.MANIFEST)["num_episodes"]) or wanted  # what is there
+    for attempt in range(3):
         try:
-            rec = fmt.read_shard_record(d)
-        except FileNotFoundError:
-            raise DatasetCorruptError(f"shard {d} listed in the manifest is missing",
-                                      f"run `d5rl verify {spec.id}`, then `d5rl generate {spec.id}`") from None
-        if rec["arrays"] != entry["arrays"]:
-            raise DatasetCorruptError(f"shard {d} does not match the manifest",
-                                      f"run `d5rl verify {spec.id}`; regenerate with --force")
-        shard_dirs.append(d)
-        records.append(rec)
-    last = records[-1]["episodes"]
-    n_last = n - last[0] if n < last[1] else None
-    chunks, aligns = _shard_chunks(shard_dirs, records, n_last)
+            return _open(spec, dspec, seed, root, wanted, episodes is not None, in_memory, obs_keys, workers,
+                         progress, derived_kwargs)
+        except _NotReady as e:
+            if not generate or attempt == 2:
+                raise e.error from None
+            if e.damaged:
+                print(f"warning: {e.error.message}; regenerating it", file=sys.stderr, flush=True)
+            generation.generate(spec, seed=seed, num_episodes=wanted, workers=workers, progress=progress)
+    raise AssertionError("unreachable")
 
-    if dspec.derived is not None:
-        extra_roots = resolve(dspec.derived)(spec, root, manifest, episodes=n, workers=workers,
-                                             progress=progress, **derived_kwargs)
-        for extra in extra_roots:
-            extra_records = [fmt.read_shard_record(Path(extra) / d.name) for d in shard_dirs]
-            c, a = _shard_chunks([Path(extra) / d.name for d in shard_dirs], extra_records, n_last)
-            chunks.update(c)
-            aligns.update(a)
+
+def _open(spec, dspec, seed, root, wanted, partial, in_memory, obs_keys, workers, progress, derived_kwargs):
+    from d5rl.datasets import generation
+
+    manifest_path = root / fmt.MANIFEST
+    have = fmt.read_manifest(manifest_path)["num_episodes"] if manifest_path.exists() else 0
+    if have < wanted:
+        raise _NotReady(DatasetNotFoundError(
+            f"dataset {dspec.name} (seed {seed}) has {have} of the {wanted} episodes asked for in {root}",
+            f"run `d5rl generate {spec.id}" + (f" --episodes {wanted}`" if partial else "`")))
+    n = wanted
+    if dspec.derived is not None:  # build missing caches first (may write; takes the write lock)
+        extra_roots = resolve(dspec.derived)(spec, root, fmt.read_manifest(manifest_path), episodes=n,
+                                             workers=workers, progress=progress, **derived_kwargs)
     elif derived_kwargs:
         raise TypeError(f"unexpected arguments for {spec.id}'s dataset: {sorted(derived_kwargs)}")
+    else:
+        extra_roots = []
+    with lock.reading(root):  # the manifest and the shards below belong together
+        manifest = fmt.read_manifest(manifest_path)
+        generation.check_current(manifest, dspec, seed, root)
+        if manifest["num_episodes"] < dspec.num_episodes and not partial:
+            warnings.warn(
+                f"{dspec.name} has only {manifest['num_episodes']} of its {dspec.num_episodes} episodes "
+                f"(generated with --episodes); run `d5rl generate {spec.id}` for the full dataset",
+                stacklevel=4,
+            )
+        repair = f"run `d5rl generate {spec.id}` (it regenerates damaged shards and keeps the rest)"
+        shard_dirs, records = [], []
+        for entry in manifest["shards"]:
+            if entry["episodes"][0] >= n:
+                break
+            d = root / "shards" / entry["name"]
+            try:
+                rec = fmt.read_shard_record(d)
+            except (FileNotFoundError, DatasetCorruptError):
+                raise _NotReady(DatasetCorruptError(f"shard {d} is missing or unreadable", repair), True) from None
+            if rec["arrays"] != entry["arrays"] and not _extends(rec, entry, manifest):
+                raise _NotReady(DatasetCorruptError(f"shard {d} does not match the manifest", repair), True)
+            problems = fmt.check_shard(d, rec)
+            if problems:
+                raise _NotReady(DatasetCorruptError(f"damaged shard: {problems[0]}", repair), True)
+            shard_dirs.append(d)
+            records.append(rec)
+        last = records[-1]["episodes"]
+        n_last = n - last[0] if n < last[1] else None
+        chunks, aligns = _shard_chunks(shard_dirs, records, n_last)
+        for extra in extra_roots:
+            extra_dirs = [Path(extra) / d.name for d in shard_dirs]
+            extra_records = []
+            for d, rec in zip(extra_dirs, records):
+                try:
+                    ex = fmt.read_shard_record(d)
+                except (FileNotFoundError, DatasetCorruptError):
+                    raise _NotReady(DatasetCorruptError(f"cache shard {d} is missing or unreadable", repair),
+                                    True) from None
+                problems = fmt.check_shard(d, ex)
+                if problems or ex.get("source_states_sha256") != rec["arrays"]["states"]["sha256"]:
+                    raise _NotReady(DatasetCorruptError(
+                        f"damaged cache shard: {problems[0] if problems else d}", repair), True)
+                extra_records.append(ex)
+            c, a = _shard_chunks(extra_dirs, extra_records, n_last)
+            chunks.update(c)
+            aligns.update(a)
 
-    arrays: dict[str, Any] = {}
-    for key, parts in chunks.items():
-        arr = ChunkedArray(parts)
-        load = in_memory is True or (in_memory == "auto" and arr.nbytes <= IN_MEMORY_LIMIT_BYTES)
-        arrays[key] = np.asarray(arr) if load else (parts[0] if len(parts) == 1 else arr)
+        arrays: dict[str, Any] = {}
+        for key, parts in chunks.items():
+            arr = ChunkedArray(parts)
+            load = in_memory is True or (in_memory == "auto" and arr.nbytes <= IN_MEMORY_LIMIT_BYTES)
+            arrays[key] = np.asarray(arr) if load else (parts[0] if len(parts) == 1 else arr)
     lengths = np.array([x for r in records for x in r["episode_lengths"]][:n])
     meta = [m for r in records for m in r["episode_meta"]][:n]
     if spec.relabel is not None:

@@ -27,17 +27,21 @@ import numpy as np
 
 from d5rl import parallel
 from d5rl.datasets import format as fmt
+from d5rl.datasets import lock
 from d5rl.registry import resolve
 
 RENDERS_DIR = "renders"
 
 
 def _shard_is_current(shard_dir: Path, source_sha: str, fn: str, kwargs: dict) -> bool:
+    """Rendered from these states with these settings, and intact (checksums, see format.check_shard)."""
     try:
         rec = fmt.read_shard_record(shard_dir)
     except Exception:
         return False
-    return rec.get("source_states_sha256") == source_sha and rec.get("render") == {"fn": fn, "kwargs": kwargs}
+    if rec.get("source_states_sha256") != source_sha or rec.get("render") != {"fn": fn, "kwargs": kwargs}:
+        return False
+    return not fmt.check_shard(shard_dir, rec)
 
 
 def render_shard(dataset_shard: str, out_root: str, index: int, fn: str, kwargs: dict) -> dict:
@@ -48,7 +52,7 @@ def render_shard(dataset_shard: str, out_root: str, index: int, fn: str, kwargs:
     render = resolve(fn)
     lengths = rec["episode_lengths"]
     total = sum(lengths) + len(lengths)
-    writer = fmt.ShardWriter(Path(out_root), index)
+    writer = fmt.ShardWriter(Path(out_root), index, lock_root=Path(out_root).parent.parent)  # <root>/renders/<name>
     try:
         outs: dict[str, np.memmap] = {}
         row = 0
@@ -87,12 +91,40 @@ def ensure_render_cache(root: str | Path, manifest: dict, fn: str, kwargs: dict[
     episodes (whole shards); render what is missing.  Returns the cache directory."""
     root = Path(root)
     out = root / RENDERS_DIR / name
-    out.mkdir(parents=True, exist_ok=True)
-    fmt.clean_temporaries(out)
     kwargs = {k: (list(v) if isinstance(v, tuple) else v) for k, v in kwargs.items()}
     n = manifest["num_episodes"] if episodes is None else int(episodes)
+    if not _jobs(root, out, manifest, n, fn, kwargs)[0]:
+        return out
+    fmt.ensure_writable(out)
+    with lock.writing(root, "rendering"):  # one writer at a time; check again under the lock
+        fmt.clean_temporaries(out)
+        jobs, todo_eps = _jobs(root, out, manifest, n, fn, kwargs)
+        if not jobs:
+            return out
+        bar = None
+        if progress:
+            from tqdm import tqdm
+
+            bar = tqdm(total=todo_eps, desc=f"rendering {name}", unit="ep")
+        try:
+            parallel.run_jobs(render_shard, jobs, workers=workers, on_message=bar.update if bar is not None else None,
+                              shared_dir=out)
+        except OSError as e:
+            full = fmt.disk_full_error(out, e)
+            if full is None:
+                raise
+            raise full from None
+        finally:
+            if bar is not None:
+                bar.close()
+            fmt.clean_temporaries(out)
+    return out
+
+
+def _jobs(root: Path, out: Path, manifest: dict, n: int, fn: str, kwargs: dict) -> tuple[list[tuple], int]:
+    """Render jobs for the shards of the first ``n`` episodes whose cache is missing, stale or damaged."""
     jobs, todo_eps = [], 0
-    for i, entry in enumerate(manifest["shards"]):
+    for entry in manifest["shards"]:
         if entry["episodes"][0] >= n:
             break
         sha = entry["arrays"]["states"]["sha256"]
@@ -101,17 +133,4 @@ def ensure_render_cache(root: str | Path, manifest: dict, fn: str, kwargs: dict[
         index = int(entry["name"].split("-")[1])
         jobs.append((str(root / "shards" / entry["name"]), str(out), index, fn, kwargs))
         todo_eps += entry["episodes"][1] - entry["episodes"][0]
-    if not jobs:
-        return out
-    bar = None
-    if progress:
-        from tqdm import tqdm
-
-        bar = tqdm(total=todo_eps, desc=f"rendering {name}", unit="ep")
-    try:
-        parallel.run_jobs(render_shard, jobs, workers=workers, on_message=bar.update if bar is not None else None,
-                          shared_dir=out)
-    finally:
-        if bar is not None:
-            bar.close()
-    return out
+    return jobs, todo_eps

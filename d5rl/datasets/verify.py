@@ -32,7 +32,7 @@ def verify_dataset(task: str | TaskSpec, seed: int | None = None, progress: bool
         hint = "generation did not finish" if (root / "shards").exists() else "it was never generated"
         return VerifyReport(root, 0, [f"{manifest_path}: missing ({hint}; run `d5rl generate {spec.id}`)"])
     try:
-        manifest = fmt.load_json(manifest_path, "manifest")
+        manifest = fmt.read_manifest(manifest_path)
     except D5RLError as e:
         return VerifyReport(root, 0, [e.message])
     entries = manifest.get("shards", [])

@@ -6,23 +6,14 @@ the details are in the cell directory.
 
 from __future__ import annotations
 
-import contextlib
 import json
 import sys
 
 
-def _die_with_parent() -> None:
-    """Linux: SIGKILL this worker when the sweep process dies, so no orphan races a resumed sweep."""
-    if sys.platform.startswith("linux"):
-        with contextlib.suppress(Exception):
-            import ctypes
-            import signal
-
-            ctypes.CDLL("libc.so.6", use_errno=True).prctl(1, int(signal.SIGKILL))  # PR_SET_PDEATHSIG
-
-
 def main(argv: list[str] | None = None) -> int:
-    _die_with_parent()
+    from d5rl.parallel import die_with_parent  # light imports only
+
+    die_with_parent()  # no orphan races a resumed sweep
     argv = sys.argv[1:] if argv is None else argv
     with open(argv[0]) as f:
         spec = json.load(f)

@@ -20,9 +20,10 @@ REPO = Path(__file__).resolve().parents[2]
 
 
 def tree_digest(root: Path) -> dict[str, str]:
+    """sha256 of every data file; dotfiles are bookkeeping (locks, verification stamps), not data."""
     return {
         str(p.relative_to(root)): hashlib.sha256(p.read_bytes()).hexdigest()
-        for p in sorted(root.rglob("*")) if p.is_file()
+        for p in sorted(root.rglob("*")) if p.is_file() and not p.name.startswith(".")
     }
 
 

@@ -30,6 +30,8 @@ class ToyGenerator:
         self.pixels = pixels
 
     def episode(self, index, rng):
+        if os.environ.get("D5RL_TOY_PIDS"):  # tests that kill generators look for leftover workers
+            open(os.path.join(os.environ["D5RL_TOY_PIDS"], str(os.getpid())), "w").close()
         if self.delay:
             time.sleep(self.delay)
         t = int(rng.integers(3, 10))
@@ -76,9 +78,16 @@ def register_toy(name="toy", num_episodes=20, per_shard=4, relabel=None, **kwarg
     return register(spec)
 
 
-if __name__ == "__main__":  # used by the resume test: generate in a process that gets killed
+if __name__ == "__main__":
+    # `python -m tests.datasets.toy NAME EPISODES DELAY WORKERS`: generate in a process that gets killed;
+    # `python -m tests.datasets.toy cli NAME EPISODES DELAY -- d5rl CLI args...`: the CLI on a toy task.
     import sys
 
+    if sys.argv[1] == "cli":
+        from d5rl.cli import main
+
+        register_toy(name=sys.argv[2], num_episodes=int(sys.argv[3]), delay=float(sys.argv[4]))
+        sys.exit(main(sys.argv[sys.argv.index("--") + 1:]))
     from d5rl.datasets.generation import generate
 
     spec = register_toy(name=sys.argv[1], num_episodes=int(sys.argv[2]), delay=float(sys.argv[3]))
