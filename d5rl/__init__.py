@@ -6,19 +6,15 @@
 
 from __future__ import annotations
 
-import os
-
-# Headless rendering by default; must precede the first `import mujoco`.
-os.environ.setdefault("MUJOCO_GL", "egl")
-
-from d5rl.xla_flags import configure_default_flags  # noqa: E402
-
-configure_default_flags()  # before JAX's first computation; see d5rl/xla_flags.py
-
 __version__ = "0.1.0"
 
 from d5rl.errors import D5RLError  # noqa: E402
-from d5rl.registry import episode_score, get_spec, list_tasks, make_env, normalize_score, parse_task_id  # noqa: E402
+from d5rl.registry import (episode_score, get_spec, list_tasks, make_env, normalize_score,  # noqa: E402
+                           parse_task_id, register_all)
+
+# Every task is a Gymnasium id from here on: gymnasium.make("d5rl/a1-walk-v0") works after `import d5rl`.
+# (Registration imports no MuJoCo and no JAX; XLA flags are set only by d5rl.agents, where d5rl trains.)
+register_all()
 
 
 def load_dataset(task_id: str, **kwargs):

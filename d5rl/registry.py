@@ -136,6 +136,11 @@ def _register_with_gymnasium(spec: TaskSpec) -> None:
     )
 
 
+def register_all() -> None:
+    """Import every family's ``registration`` module (on ``import d5rl``; cheap, idempotent)."""
+    _load_families()
+
+
 def _load_families() -> None:
     global _LOADED
     if _LOADED:

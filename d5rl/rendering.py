@@ -1,14 +1,15 @@
 """Headless rendering: pick a GL backend and make renderers with clear errors.
 
-``MUJOCO_GL`` must be set before mujoco is imported; ``import d5rl`` defaults it
-to ``egl`` (Mesa's llvmpipe works without a GPU).  ``osmesa`` is the fallback.
+``MUJOCO_GL`` must be set before mujoco is imported; :mod:`d5rl.envs` defaults it
+to ``egl`` on Linux (Mesa's llvmpipe works without a GPU).  ``osmesa`` is the fallback.
 """
 
 from __future__ import annotations
 
 import os
 
-import mujoco
+import d5rl.envs  # noqa: F401  (the MUJOCO_GL default, before mujoco is imported)
+import mujoco  # noqa: E402
 
 from d5rl.errors import RenderBackendError
 

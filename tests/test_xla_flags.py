@@ -1,4 +1,5 @@
-"""XLA flags set on ``import d5rl``: appended, never overriding the user's, and effective."""
+"""XLA flags set where d5rl trains (``import d5rl.agents``), never on ``import d5rl``: appended, never
+overriding the user's, and effective."""
 
 import os
 import subprocess
@@ -32,7 +33,7 @@ def test_the_experimental_flag_is_only_set_for_measured_jaxlib_versions(monkeypa
 
 
 CHECK = """
-import d5rl, jax, jax.numpy as jnp, re
+import d5rl.agents, jax, jax.numpy as jnp, re
 x, k, w = (jax.ShapeDtypeStruct(s, jnp.float32) for s in ((64, 32, 32, 16), (3, 3, 16, 32), (256, 256)))
 f = lambda x, k, w: (jax.lax.conv_general_dilated(x, k, (1, 1), "SAME", dimension_numbers=("NHWC", "HWIO", "NHWC")), w @ w)
 txt = jax.jit(f).lower(x, k, w).compile().as_text()
@@ -47,3 +48,15 @@ def test_convolutions_leave_ynnpack_in_a_fresh_process():
                              env={k: v for k, v in os.environ.items() if k != "XLA_FLAGS"})
     assert out.returncode == 0, out.stderr[-2000:]
     assert out.stdout.split() == ["dot"]  # dot products stay on YNNPACK, convolutions do not
+
+
+def test_import_d5rl_sets_no_xla_flags_and_registers_gymnasium_ids():
+    code = ("import os, gymnasium, d5rl; assert 'XLA_FLAGS' not in os.environ, os.environ['XLA_FLAGS']; "
+            "env = gymnasium.make('d5rl/a1-walk-v0'); print(env.spec.id, os.environ['MUJOCO_GL'])")
+    env = {k: v for k, v in os.environ.items() if k not in ("XLA_FLAGS", "MUJOCO_GL")}
+    out = subprocess.run([sys.executable, "-c", code], capture_output=True, text=True, timeout=120, env=env)
+    assert out.returncode == 0, out.stderr[-2000:]
+    assert out.stdout.split() == ["d5rl/a1-walk-v0", "egl"]
+    out = subprocess.run([sys.executable, "-c", "import os, d5rl, d5rl.envs.a1.task; print(os.environ['MUJOCO_GL'])"],
+                         capture_output=True, text=True, timeout=120, env={**env, "MUJOCO_GL": "osmesa"})
+    assert out.stdout.strip() == "osmesa"  # the user's choice stands

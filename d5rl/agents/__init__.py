@@ -15,6 +15,9 @@ from __future__ import annotations
 import importlib
 
 from d5rl.errors import D5RLError
+from d5rl.xla_flags import configure_default_flags
+
+configure_default_flags()  # d5rl trains from here on: its XLA:CPU flags, before JAX starts (never the user's)
 
 # name -> (module, class)
 AGENTS = {

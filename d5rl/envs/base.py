@@ -13,6 +13,7 @@ import gymnasium as gym
 import mujoco
 import numpy as np
 
+from d5rl.errors import D5RLError
 from d5rl.rendering import make_renderer
 
 # What a dataset stores per step to replay or re-render exactly: time, qpos, qvel,
@@ -20,8 +21,23 @@ from d5rl.rendering import make_renderer
 STATE_SPEC = mujoco.mjtState.mjSTATE_INTEGRATION
 
 
+class ResetNeededError(D5RLError, gym.error.ResetNeeded):
+    """``step`` was called before the first ``reset``."""
+
+
+class ActionError(D5RLError, ValueError):
+    """An action of the wrong shape, or with NaN or infinite entries."""
+
+
 class MujocoEnv(gym.Env):
-    """Base class: physics, state save/restore, rendering.  Subclasses define the task."""
+    """Base class: physics, state save/restore, rendering.  Subclasses define the task.
+
+    Every family's ``step`` starts with :meth:`check_action`: stepping before ``reset`` raises
+    :class:`ResetNeededError`, an action of the wrong shape or with a NaN/inf entry raises
+    :class:`ActionError` (nothing is simulated), and finite values outside ``[-1, 1]`` are clipped.
+    """
+
+    _was_reset = False
 
     metadata = {"render_modes": ["rgb_array"], "render_fps": 20}
 
@@ -43,6 +59,28 @@ class MujocoEnv(gym.Env):
         self.render_camera = render_camera
         self._renderers: dict[tuple[int, int], mujoco.Renderer] = {}
         self.metadata = {**self.metadata, "render_fps": int(round(1.0 / self.dt))}
+
+    def reset(self, *, seed: int | None = None, options: dict | None = None):
+        super().reset(seed=seed, options=options)
+        self._was_reset = True
+
+    def check_action(self, action) -> np.ndarray:
+        """``action`` as float64, clipped to ``[-1, 1]``, after checking that it can be applied."""
+        if not self._was_reset:
+            raise ResetNeededError(f"{type(self).__name__}.step() was called before reset()",
+                                   "call env.reset(seed=...) first")
+        shape = self.action_space.shape
+        try:
+            a = np.asarray(action, dtype=np.float64)
+        except (TypeError, ValueError):
+            raise ActionError(f"action {action!r} is not numeric", f"pass a float array of shape {shape}") from None
+        if a.shape != shape:
+            raise ActionError(f"action must have shape {shape}, got {a.shape}", f"pass a float array of shape {shape}")
+        if not np.isfinite(a).all():
+            bad = np.flatnonzero(~np.isfinite(a)).tolist()
+            raise ActionError(f"action has NaN or infinite entries at {bad}: {a.tolist()}",
+                              "check the policy's outputs (a diverged network gives NaN); actions must be finite")
+        return np.clip(a, self.action_space.low, self.action_space.high)
 
     # --- physics -----------------------------------------------------------------
     @property

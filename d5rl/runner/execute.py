@@ -46,7 +46,6 @@ def configure_worker(single_thread: bool = True, nice: int = 0) -> None:
         add_xla_flags(*SINGLE_THREAD)
         for k, v in SINGLE_THREAD_ENV.items():
             os.environ.setdefault(k, v)
-    os.environ.setdefault("MUJOCO_GL", "egl")
     if nice:
         with contextlib.suppress(OSError):
             os.nice(nice)

@@ -5,7 +5,7 @@ from __future__ import annotations
 import json
 from pathlib import Path
 
-from d5rl.envs.a1.data import num_episodes
+from d5rl.envs.a1.buffers import num_episodes
 from d5rl.registry import DatasetSpec, ScoreRef, TaskSpec, register
 
 ENTRY = "d5rl.envs.a1.task:A1Env"

@@ -168,9 +168,7 @@ class A1Env(MujocoEnv):
                                "heading_error": heading_error}
 
     def step(self, action):
-        action = np.clip(np.asarray(action, dtype=np.float64), -1.0, 1.0)
-        if action.shape != (12,):
-            raise ValueError(f"action must have shape (12,), got {action.shape}")
+        action = self.check_action(action)
         self.do_simulation(NOMINAL_POSE + ACTION_SCALE * action)
         self._prev_action = action
         self._t += 1

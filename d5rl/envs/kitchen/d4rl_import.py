@@ -39,6 +39,24 @@ def _episode_bounds(terminals: np.ndarray, timeouts: np.ndarray, n: int) -> list
     return bounds
 
 
+def _check_source(path: Path, obs, actions, terminals, timeouts) -> None:
+    """One-line errors for a file that cannot be a D4RL kitchen dataset, before anything is written."""
+    n = len(obs)
+    hint = "this does not look like an intact D4RL kitchen file"
+    if n < 2:
+        raise D5RLError(f"{path}: {n} observation rows; an episode needs at least 2", hint)
+    for name, arr in (("actions", actions), ("terminals", terminals), ("timeouts", timeouts)):
+        if len(arr) != n:
+            raise D5RLError(f"{path}: {name} has {len(arr)} rows, observations have {n}", hint)
+    if actions.ndim != 2 or actions.shape[1] != 9:
+        raise D5RLError(f"{path}: actions have shape {actions.shape}, expected (N, 9)", hint)
+    for name, arr in (("observations", obs[:, :30]), ("actions", actions)):
+        bad = ~np.isfinite(np.asarray(arr, np.float64))
+        if bad.any():
+            row = int(np.flatnonzero(bad.any(axis=1))[0])
+            raise D5RLError(f"{path}: {name} has {int(bad.sum())} NaN or infinite values (first in row {row})", hint)
+
+
 def _states_from_qpos(model: mujoco.MjModel, qpos: np.ndarray) -> np.ndarray:
     data = mujoco.MjData(model)
     out = np.empty((len(qpos), mujoco.mj_stateSize(model, STATE_SPEC)))
@@ -82,6 +100,7 @@ def import_file(path: str | Path, out: str | Path | None = None, *, task: str = 
         n = len(obs)
         terminals = np.asarray(f["terminals"]) if "terminals" in f else np.zeros(n, bool)
         timeouts = np.asarray(f["timeouts"]) if "timeouts" in f else np.zeros(n, bool)
+    _check_source(path, obs, actions, terminals, timeouts)
     bounds = _episode_bounds(terminals, timeouts, n)
     (root / "shards").mkdir(parents=True, exist_ok=True)
     shards = []

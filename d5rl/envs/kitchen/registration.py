@@ -1,8 +1,9 @@
 """Standard Franka Kitchen task ids."""
 
 from d5rl.envs.kitchen.subtasks import MIXED, PARTIAL
-from d5rl.envs.kitchen.task import MAX_EPISODE_STEPS
 from d5rl.registry import DatasetSpec, TaskSpec, register
+
+MAX_EPISODE_STEPS = 280  # control steps of 0.08 s (the D5RL release's standard kitchen)
 
 STANDARD_DATASET = DatasetSpec(
     name="kitchen-standard",

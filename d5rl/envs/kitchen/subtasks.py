@@ -9,9 +9,12 @@ definitions unchanged (the joints keep their names in every scene variation).
 from __future__ import annotations
 
 import dataclasses
+from typing import TYPE_CHECKING
 
-import mujoco
 import numpy as np
+
+if TYPE_CHECKING:  # only the type: task registration imports these names without loading MuJoCo
+    import mujoco
 
 THRESHOLD = 0.3
 
@@ -25,6 +28,8 @@ class Subtask:
     threshold: float = THRESHOLD
 
     def qpos_indices(self, model: mujoco.MjModel) -> np.ndarray:
+        import mujoco
+
         idx = []
         for name in self.joints:
             j = model.joint(name)

@@ -54,7 +54,6 @@ from d5rl.envs.kitchen import model as km
 from d5rl.envs.kitchen.subtasks import MIXED, SUBTASK_NAMES, SUBTASKS, CompletionChecker
 
 FRAME_SKIP = 40  # 40 x 2 ms = 0.08 s control step
-MAX_EPISODE_STEPS = 280
 ACTION_SCALE = 2.0  # rad/s (m/s for fingers) at |action| = 1
 CAMERAS = ("overview", "wrist")
 OBS_MODES = ("pixels", "state")
@@ -155,9 +154,7 @@ class KitchenEnv(MujocoEnv):
         return np.clip(target, self._ctrl_lo, self._ctrl_hi)
 
     def step(self, action):
-        action = np.asarray(action)
-        if action.shape != self.action_space.shape:
-            raise ValueError(f"action must have shape {self.action_space.shape}, got {action.shape}")
+        action = self.check_action(action)
         self.do_simulation(self.action_to_ctrl(action))
         completed = self.completed()
         in_goal = completed[self._task_cols]

@@ -32,7 +32,8 @@ import numpy as np
 from d5rl.datasets.episode import Episode
 from d5rl.envs.widowx import model as wm
 from d5rl.envs.widowx import scripted
-from d5rl.envs.widowx.task import MAX_EPISODE_STEPS, WidowXSortingEnv
+from d5rl.envs.widowx.registration import MAX_EPISODE_STEPS
+from d5rl.envs.widowx.task import WidowXSortingEnv
 
 PICKPLACE_STEPS = 60
 

@@ -2,8 +2,9 @@
 
 from __future__ import annotations
 
-from d5rl.envs.widowx.task import MAX_EPISODE_STEPS
 from d5rl.registry import DatasetSpec, TaskSpec, register
+
+MAX_EPISODE_STEPS = 120  # control steps of 0.1 s
 
 _ENTRY = "d5rl.envs.widowx.task:WidowXSortingEnv"
 _GENERATOR = "d5rl.envs.widowx.data:WidowXScriptedGenerator"

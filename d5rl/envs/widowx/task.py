@@ -56,7 +56,6 @@ from d5rl.envs.base import MujocoEnv
 from d5rl.envs.widowx import controller
 from d5rl.envs.widowx import model as wm
 
-MAX_EPISODE_STEPS = 120
 FRAME_SKIP = 50  # 10 Hz control with 2 ms physics steps
 HOME_POSE = np.array([0.22, 0.0, 0.18, math.pi / 2])
 SETTLE_STEPS = 150  # 0.3 s of physics after placing the objects
@@ -132,7 +131,7 @@ class WidowXSortingEnv(MujocoEnv):
         self.data.ctrl[self.index.finger_act] = [f, -f]
 
     def step(self, action):
-        a = np.clip(np.asarray(action, dtype=np.float64).reshape(5), -1.0, 1.0)
+        a = self.check_action(action)
         pose = self.commanded_pose()
         pose[:3] += a[:3] * self.max_delta
         pose[3] += a[3] * self.max_yaw_delta

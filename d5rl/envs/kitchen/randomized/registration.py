@@ -1,8 +1,9 @@
 """Randomized Franka Kitchen task ids (imported by the kitchen family's registration)."""
 
-from d5rl.envs.kitchen.randomized.task import MAX_EPISODE_STEPS
 from d5rl.envs.kitchen.subtasks import MIXED, PARTIAL
 from d5rl.registry import DatasetSpec, TaskSpec, register
+
+MAX_EPISODE_STEPS = 500  # control steps of 0.08 s (the paper's randomized kitchen)
 
 
 def _dataset(mode: str, n: int, desc: str) -> DatasetSpec:

@@ -43,7 +43,6 @@ from d5rl.envs.kitchen.randomized.domain import Domain, apply_domain, compiled_v
 from d5rl.envs.kitchen.subtasks import MIXED
 from d5rl.envs.kitchen.task import KitchenEnv
 
-MAX_EPISODE_STEPS = 500
 CAMERAS = ("left", "right", "wrist")
 
 
