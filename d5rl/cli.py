@@ -32,7 +32,10 @@ def _dataset_status(spec) -> tuple[str, dict | None]:
     root = generation.dataset_root(spec.dataset)
     path = root / fmt.MANIFEST
     if path.exists():
-        m = fmt.load_json(path, "manifest")
+        try:
+            m = fmt.read_manifest(path)
+        except D5RLError:
+            return "unreadable manifest (generate --force)", None
         try:
             generation.check_current(m, spec.dataset, spec.dataset.default_seed, root)
         except D5RLError:
@@ -130,8 +133,8 @@ def cmd_verify(args) -> int:
     print(f"CORRUPT: {len(report.problems)} problem(s) in {report.root}", file=sys.stderr)
     for p in report.problems:
         print(f"  {p}", file=sys.stderr)
-    print(f"  fix: `d5rl generate {args.task}` regenerates missing shards; "
-          f"delete damaged shard directories first, or use --force", file=sys.stderr)
+    print(f"  fix: `d5rl generate {args.task}` regenerates the missing and damaged shards (intact ones are kept)",
+          file=sys.stderr)
     return 1
 
 
@@ -267,18 +270,42 @@ _PLUGINS = [
 ]
 
 
+def _os_error(e: OSError) -> D5RLError:
+    """A problem of the machine (disk full, permissions) as a one-line error."""
+    from d5rl import paths
+    from d5rl.datasets.format import disk_full_error
+
+    where = Path(e.filename) if getattr(e, "filename", None) else paths.home()
+    full = disk_full_error(where, e)
+    if full is not None:
+        return full
+    return D5RLError(f"{e.strerror or e}" + (f": {e.filename}" if getattr(e, "filename", None) else ""),
+                     "check that the path exists and is writable (D5RL_HOME sets where data goes); "
+                     "D5RL_DEBUG=1 shows the traceback")
+
+
 def main(argv: list[str] | None = None) -> int:
+    """Run one command; a problem the user can fix is one line on stderr (exit 2), never a traceback
+    (set D5RL_DEBUG=1 to see one)."""
+    import os
+
     parser = build_parser()
     args = parser.parse_args(argv)
+    debug = os.environ.get("D5RL_DEBUG", "") not in ("", "0")
     try:
-        return int(args.func(args) or 0)
+        try:
+            return int(args.func(args) or 0)
+        except OSError as e:
+            if debug or isinstance(e, D5RLError):
+                raise
+            raise _os_error(e) from e
     except D5RLError as e:
-        print(f"error: {e.message}", file=sys.stderr)
-        if e.hint:
-            print(f"  hint: {e.hint}", file=sys.stderr)
+        if debug:
+            raise
+        print(f"error: {e.message}" + (f" (hint: {e.hint})" if e.hint else ""), file=sys.stderr)
         return 2
     except KeyboardInterrupt:
-        print("interrupted; generation resumes where it stopped when run again", file=sys.stderr)
+        print("interrupted; run the same command again to resume where it stopped", file=sys.stderr)
         return 130
 
 

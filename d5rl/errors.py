@@ -13,7 +13,7 @@ class D5RLError(Exception):
     def __init__(self, message: str, hint: str | None = None):
         self.message = message
         self.hint = hint
-        super().__init__(message if hint is None else f"{message}\n  hint: {hint}")
+        super().__init__(message if hint is None else f"{message} (hint: {hint})")
 
 
 class UnknownTaskError(D5RLError, KeyError):

@@ -9,7 +9,9 @@ static field.
 
 from __future__ import annotations
 
+import dataclasses
 import json
+import math
 from typing import Any, Iterable, Iterator, Mapping
 
 from d5rl.errors import D5RLError
@@ -141,3 +143,62 @@ class Config(Mapping):
             return v
 
         return {k: plain(v) for k, v in self._data.items()}
+
+
+# --- value checks -------------------------------------------------------------------------------------------
+@dataclasses.dataclass(frozen=True)
+class Bound:
+    """What a numeric config value may be: its type, bounds, and whether None is allowed."""
+
+    kind: type  # int or float (an int is accepted where a float is expected)
+    ge: float | None = None
+    gt: float | None = None
+    le: float | None = None
+    lt: float | None = None
+    optional: bool = False  # None is allowed (means "automatic")
+    each: bool = False  # a tuple of such values (e.g. hidden layer widths), at least one
+
+    def describe(self) -> str:
+        parts = [("an integer" if self.kind is int else "a number")]
+        parts += [f"{op} {v:g}" for op, v in ((">=", self.ge), (">", self.gt), ("<=", self.le), ("<", self.lt))
+                  if v is not None]
+        text = " ".join(parts)
+        text = f"a list of {text.replace('an integer', 'integers').replace('a number', 'numbers')}" if self.each else text
+        return text + (" or none" if self.optional else "")
+
+    def accepts(self, v: Any) -> bool:
+        if v is None:
+            return self.optional
+        if self.each:
+            return isinstance(v, tuple) and len(v) > 0 and all(dataclasses.replace(self, each=False).accepts(x)
+                                                                for x in v)
+        if isinstance(v, bool) or not isinstance(v, (int, float)) or (self.kind is int and not isinstance(v, int)):
+            return False
+        if not math.isfinite(v):
+            return False
+        return ((self.ge is None or v >= self.ge) and (self.gt is None or v > self.gt)
+                and (self.le is None or v <= self.le) and (self.lt is None or v < self.lt))
+
+
+# Keys that mean the same in every agent's config, checked wherever they appear.
+AGENT_BOUNDS = {
+    "batch_size": Bound(int, ge=1),
+    "actor_lr": Bound(float, gt=0), "critic_lr": Bound(float, gt=0), "value_lr": Bound(float, gt=0),
+    "temp_lr": Bound(float, gt=0),
+    "hidden_dims": Bound(int, ge=1, each=True), "critic_hidden_dims": Bound(int, ge=1, each=True),
+    "discount": Bound(float, gt=0, le=1), "tau": Bound(float, ge=0, le=1),
+    "num_qs": Bound(int, ge=1), "num_min_qs": Bound(int, ge=1), "utd_ratio": Bound(int, ge=1),
+    "expectile": Bound(float, gt=0, lt=1), "offline_ratio": Bound(float, ge=0, le=1),
+    "start_steps": Bound(int, ge=0), "actor_decay_steps": Bound(int, ge=0, optional=True),
+    "diffusion_steps": Bound(int, ge=1), "num_samples": Bound(int, ge=1), "cql_n_actions": Bound(int, ge=1),
+    "policy_freq": Bound(int, ge=1),
+}
+
+
+def check_bounds(cfg: Config, bounds: Mapping[str, Bound]) -> Config:
+    """Raise a one-line :class:`ConfigError` for the first value outside its bounds; return ``cfg``."""
+    for key, bound in bounds.items():
+        if key in cfg and not bound.accepts(cfg[key]):
+            raise ConfigError(f"config value {key}={cfg[key]!r} is invalid: it must be {bound.describe()}",
+                              f"pass e.g. --set {key}=... with {bound.describe()}")
+    return cfg

@@ -30,10 +30,13 @@ def add_train_parser(subparsers) -> argparse.ArgumentParser:
 
 def cmd_train(args) -> int:
     from d5rl.agents import get_agent
-    from d5rl.training.loop import get_train_config, split_overrides, train
+    from d5rl.agents.config import AGENT_BOUNDS, check_bounds
+    from d5rl.training.loop import TRAIN_BOUNDS, get_train_config, split_overrides, train
 
     _, config_fn = get_agent(args.algo)
     agent_cfg, train_cfg = split_overrides(args.overrides, config_fn(), get_train_config())
+    check_bounds(agent_cfg, AGENT_BOUNDS)
+    check_bounds(train_cfg, TRAIN_BOUNDS)
     if args.show_config:
         print(json.dumps({"agent": agent_cfg.to_dict(), "train": train_cfg.to_dict()}, indent=2))
         return 0
@@ -55,18 +58,32 @@ def add_eval_parser(subparsers) -> argparse.ArgumentParser:
     p.add_argument("--seed", type=int, default=12345, help="episode i resets with seed + i")
     p.add_argument("--video", default=None, metavar="PATH", help="record the first episode (mp4)")
     p.add_argument("--task", default=None, help="evaluate on another task id (same spaces)")
+    p.add_argument("--json", action="store_true", help="print the result as JSON")
     p.set_defaults(func=cmd_eval)
     return p
 
 
 def cmd_eval(args) -> int:
+    from d5rl.agents.config import ConfigError
     from d5rl.training.evaluation import evaluate
     from d5rl.training.loop import load_run
 
+    for name, v in (("--episodes", args.episodes), ("--envs", args.envs)):
+        if v < 1:
+            raise ConfigError(f"{name} must be at least 1, got {v}", f"pass e.g. {name} 10")
     agent, resolved = load_run(args.run_dir)
     task = args.task or resolved["task_id"]
     res = evaluate(agent, task, args.episodes, args.seed, num_envs=args.envs,
                    frame_stack=resolved["train"]["frame_stack"], processes=args.processes, video_path=args.video)
     res.pop("returns", None)
-    print(json.dumps({"task_id": task, **res}, indent=2))
+    if args.json:
+        print(json.dumps({"task_id": task, **res}, indent=2))
+        return 0
+    print(f"{task}: {res['episodes']} episodes, return {res['return']:.2f} ± {res['return_std']:.2f}, "
+          f"length {res['length']:.1f}, success {res['success']:.2f}" + (f", video {res['video']}" if "video" in res
+                                                                          else ""))
+    if "score" in res:
+        print(f"normalized score: {res['score']:.3f} ± {res['score_std']:.3f}")
+    else:
+        print(f"mean return: {res['return']:.2f} (this task has no score reference)")
     return 0

@@ -2,6 +2,7 @@
 
 from __future__ import annotations
 
+import functools
 from pathlib import Path
 from typing import Any, Callable
 
@@ -37,12 +38,17 @@ def evaluate(
     ``AsyncVectorEnv``).  Episode ``i`` resets with seed ``seed + i``, so results do
     not depend on ``num_envs``.  ``video_path`` records the first episode.
     """
+    if int(num_episodes) < 1:
+        from d5rl.errors import D5RLError
+
+        raise D5RLError(f"cannot evaluate on {num_episodes} episodes", "evaluate on at least 1 episode")
     num_envs = max(1, min(int(num_envs), int(num_episodes)))
     render = video_path is not None
     fns = [env_fn or env_factory(task_id, frame_stack, "rgb_array" if (render and i == 0) else None)
            for i in range(num_envs)]
     envs = [fn() for fn in fns] if not processes else None
-    vec = gym.vector.AsyncVectorEnv(fns, copy=True, context="spawn") if processes else None
+    vec = gym.vector.AsyncVectorEnv([functools.partial(_in_worker, fn) for fn in fns], copy=True,
+                                    context="spawn") if processes else None
     returns, lengths, successes, frames = [], [], [], []
     final_infos: list[dict] = []
     key = jax.random.PRNGKey(seed)
@@ -95,6 +101,11 @@ def evaluate(
             successes += list(succ)
             final_infos += last
             ep += n
+    except BaseException:
+        if vec is not None:  # Ctrl-C or an error: stop the workers now, mid-step or not
+            vec.close(terminate=True)
+            vec = None
+        raise
     finally:
         if vec is not None:
             vec.close()
@@ -112,6 +123,20 @@ def evaluate(
         _write_video(Path(video_path), frames)
         out["video"] = str(video_path)
     return out
+
+
+def _in_worker(make_env: Callable[[], gym.Env]) -> gym.Env:
+    """Build an env inside an AsyncVectorEnv worker that dies with the evaluating process and leaves
+    Ctrl-C to it (which then terminates the workers), so no worker outlives its evaluation."""
+    import multiprocessing
+    import signal
+
+    from d5rl.parallel import die_with_parent
+
+    if multiprocessing.parent_process() is not None:  # AsyncVectorEnv also calls this once in the parent
+        signal.signal(signal.SIGINT, signal.SIG_IGN)
+        die_with_parent()
+    return make_env()
 
 
 def _render(envs, vec, processes):

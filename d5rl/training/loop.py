@@ -28,7 +28,7 @@ import jax
 import numpy as np
 
 from d5rl.agents import get_agent
-from d5rl.agents.config import Config, ConfigError
+from d5rl.agents.config import AGENT_BOUNDS, Bound, Config, ConfigError, check_bounds
 from d5rl.agents.networks import is_pixel_obs
 from d5rl.errors import D5RLError
 from d5rl.training.checkpoint import Checkpoint, load_checkpoint, restore_agent, save_checkpoint
@@ -67,6 +67,27 @@ def get_train_config() -> Config:
         tensorboard=True,  # also write TensorBoard events if tensorboardX / torch is installed
         progress=True,  # tqdm progress bar with updates/s
     )
+
+
+# What each training setting may be (checked before any work; see get_train_config for meanings).
+TRAIN_BOUNDS = {
+    "eval_interval": Bound(int, ge=0), "eval_episodes": Bound(int, ge=1),
+    "final_eval_episodes": Bound(int, ge=1, optional=True), "eval_envs": Bound(int, ge=1),
+    "log_interval": Bound(int, ge=1), "checkpoint_interval": Bound(int, ge=1), "updates_per_call": Bound(int, ge=1),
+    "frame_stack": Bound(int, ge=1, optional=True), "offline_ratio": Bound(float, ge=0, le=1, optional=True),
+    "start_steps": Bound(int, ge=0, optional=True), "buffer_capacity": Bound(int, ge=1, optional=True),
+    "dataset_episodes": Bound(int, ge=1, optional=True),
+}
+
+
+def check_run(offline_steps, online_steps, seed) -> None:
+    """One-line errors for step counts and seeds that cannot make a run."""
+    for name, v in (("--offline-steps", offline_steps), ("--online-steps", online_steps), ("--seed", seed)):
+        if isinstance(v, bool) or not isinstance(v, (int, np.integer)) or v < 0:
+            raise ConfigError(f"{name} must be a non-negative integer, got {v!r}", f"pass e.g. {name} 0")
+    if offline_steps == 0 and online_steps == 0:
+        raise ConfigError("nothing to train: --offline-steps and --online-steps are both 0",
+                          "pass --offline-steps N (and/or --online-steps N)")
 
 
 def split_overrides(overrides, agent_config: Config, train_config: Config) -> tuple[Config, Config]:
@@ -200,12 +221,15 @@ def train(
     """
     agent_cls, agent_config_fn = get_agent(algo)
     agent_cfg, cfg = split_overrides(overrides, agent_config_fn(), get_train_config())
+    check_run(offline_steps, online_steps, seed)
+    check_bounds(agent_cfg, AGENT_BOUNDS)
+    check_bounds(cfg, TRAIN_BOUNDS)
     algo = agent_cfg.agent_name
     run_dir = Path(run_dir) if run_dir is not None else default_run_dir(algo, task_id, seed)
-    run_dir.mkdir(parents=True, exist_ok=True)
 
     ds = dataset if dataset is not None else load_task_dataset(
         task_id, **({"episodes": cfg.dataset_episodes} if cfg.dataset_episodes else {}))
+    run_dir.mkdir(parents=True, exist_ok=True)
     probe = ds.sample(1, np.random.default_rng(0))
     pixels = is_pixel_obs(probe["observations"])
     defaults = agent_config_fn()

@@ -1,0 +1,140 @@
+"""Each bad input gets one line that says what to do, before any work starts (no traceback, nothing written)."""
+
+import numpy as np
+import pytest
+
+from d5rl import paths
+from d5rl.cli import main
+from tests.datasets.toy import register_toy
+
+
+def one_line_error(capsys, argv, *needles):
+    assert main(argv) == 2
+    err = capsys.readouterr().err
+    last = err.replace("\r", "\n").strip().splitlines()[-1]  # after any progress bar
+    assert last.startswith("error: ") and err.count("error: ") == 1 and "Traceback" not in err, err
+    for n in needles:
+        assert n in last, last
+    return last
+
+
+@pytest.mark.parametrize("argv, needle", [
+    (["--seed", "-1"], "dataset seed must be an integer"),
+    (["--episodes", "1000000000000"], "has 227 episodes"),
+    (["--episodes", "300"], "ask for 1 to 227 episodes"),
+    (["--episodes", "0"], "has 227 episodes"),
+    (["--episodes", "-5"], "has 227 episodes"),
+    (["--workers", "0"], "workers must be a positive number"),
+    (["--workers", "-2"], "workers must be a positive number"),
+])
+def test_generate_arguments(capsys, argv, needle):
+    one_line_error(capsys, ["generate", "a1-walk-v0", *argv], needle)
+    assert not paths.home().exists()  # refused before anything was created
+
+
+def test_unwritable_home(capsys, tmp_path, monkeypatch):
+    blocker = tmp_path / "a-file"
+    blocker.write_text("not a directory")
+    monkeypatch.setenv("D5RL_HOME", str(blocker / "d5rl"))  # unwritable even for root
+    one_line_error(capsys, ["generate", "a1-walk-v0", "--episodes", "1"], "cannot write to", "D5RL_HOME")
+
+
+def test_full_disk_is_named(capsys, monkeypatch):
+    import shutil
+
+    from d5rl.datasets import format as fmt
+
+    spec = register_toy("diskfull", num_episodes=4, per_shard=2)
+
+    def short_write(*a, **k):  # what numpy raises when the disk fills up mid-array: no errno
+        raise OSError("503200 requested and 142832 written")
+
+    monkeypatch.setattr(fmt.np, "save", short_write)
+    real = shutil.disk_usage
+    monkeypatch.setattr(fmt.shutil, "disk_usage", lambda p: real(p)._replace(free=1000))
+    one_line_error(capsys, ["generate", spec.id, "--workers", "1"], "is full", "run the same command again")
+
+
+def test_full_disk_for_real_on_a_tiny_tmpfs(capsys, tmp_path, monkeypatch):
+    import subprocess
+
+    mnt = tmp_path / "tiny"
+    mnt.mkdir()
+    if subprocess.run(["mount", "-t", "tmpfs", "-o", "size=256k", "tmpfs", str(mnt)],
+                      capture_output=True).returncode != 0:
+        pytest.skip("cannot mount a tmpfs here (needs root in a privileged container)")
+    try:
+        spec = register_toy("tiny", num_episodes=400, per_shard=200)
+        monkeypatch.setenv("D5RL_HOME", str(mnt))
+        one_line_error(capsys, ["generate", spec.id, "--workers", "1"], "is full")
+    finally:
+        subprocess.run(["umount", str(mnt)])
+
+
+@pytest.mark.parametrize("setting, needle", [
+    ("dataset_episodes=abc", "dataset_episodes='abc' is invalid"),
+    ("dataset_episodes=-5", "dataset_episodes=-5 is invalid"),
+    ("dataset_episodes=[1,2]", "dataset_episodes=(1, 2) is invalid"),
+    ("eval_episodes=0", "eval_episodes=0 is invalid"),
+    ("batch_size=0", "batch_size=0 is invalid"),
+    ("actor_lr=-1e-4", "actor_lr=-0.0001 is invalid"),
+    ("discount=1.5", "discount=1.5 is invalid"),
+    ("hidden_dims=0,3", "hidden_dims=(0, 3) is invalid"),
+])
+def test_train_settings(capsys, tmp_path, setting, needle):
+    one_line_error(capsys, ["train", "iql", "a1-walk-v0", "--offline-steps", "10", "--set", setting,
+                            "--run-dir", str(tmp_path / "run")], needle)
+    assert not (tmp_path / "run").exists() and not paths.home().exists()
+
+
+@pytest.mark.parametrize("argv, needle", [
+    (["--offline-steps", "-5"], "--offline-steps must be a non-negative integer"),
+    (["--online-steps", "-1"], "--online-steps must be a non-negative integer"),
+    (["--offline-steps", "0"], "nothing to train"),
+    (["--seed", "-3"], "--seed must be a non-negative integer"),
+    (["--offline-steps", "10", "--set", "dataset_episodes=300"], "ask for 1 to 227 episodes"),
+])
+def test_train_arguments(capsys, tmp_path, argv, needle):
+    one_line_error(capsys, ["train", "bc", "a1-walk-v0", *argv, "--run-dir", str(tmp_path / "run")], needle)
+    assert not (tmp_path / "run").exists() and not paths.home().exists()
+
+
+def test_eval_episodes(capsys, tmp_path):
+    one_line_error(capsys, ["eval", str(tmp_path), "--episodes", "0"], "--episodes must be at least 1")
+
+
+def test_evaluate_refuses_zero_episodes():
+    from d5rl.errors import D5RLError
+    from d5rl.training.evaluation import evaluate
+
+    with pytest.raises(D5RLError, match="0 episodes"):
+        evaluate(None, "toy-reach-v0", 0)
+
+
+@pytest.mark.parametrize("damage, needle", [
+    ("short_actions", "actions has 8 rows, observations have 9"),
+    ("no_actions", "has no 'actions' array"),
+    ("nan", "observations has 1 NaN or infinite values (first in row 2)"),
+    ("short_terminals", "terminals has 5 rows"),
+])
+def test_import_d4rl_kitchen_refuses_a_broken_file(capsys, tmp_path, damage, needle):
+    h5py = pytest.importorskip("h5py")
+    n = 9
+    obs = np.zeros((n, 60), np.float32)
+    actions = np.zeros((n, 9), np.float32)
+    terminals = np.zeros(n, bool)
+    if damage == "short_actions":
+        actions = actions[:-1]
+    if damage == "nan":
+        obs[2, 5] = np.nan
+    if damage == "short_terminals":
+        terminals = terminals[:5]
+    path = tmp_path / "kitchen_mixed-v0.hdf5"
+    with h5py.File(path, "w") as f:
+        f["observations"] = obs
+        if damage != "no_actions":
+            f["actions"] = actions
+        f["terminals"] = terminals
+    out = tmp_path / "imported"
+    one_line_error(capsys, ["import-d4rl-kitchen", str(path), "--out", str(out)], needle)
+    assert not out.exists()
