@@ -22,3 +22,29 @@ def test_minari_round_trip(tmp_path, monkeypatch):
         np.testing.assert_allclose(ep.rewards, ours["rewards"])
         np.testing.assert_array_equal(ep.terminations, ours["terminals"])
         np.testing.assert_array_equal(ep.truncations, ours["timeouts"])
+    assert (tmp_path / "minari").is_dir() and list((tmp_path / "minari").rglob("*.hdf5"))  # where it was told
+
+
+def test_minari_export_of_pixels_is_lossless_and_matches_its_env(tmp_path, monkeypatch):
+    import d5rl
+    from d5rl.datasets.export import d5rl_key
+
+    monkeypatch.setenv("MINARI_DATASETS_PATH", str(tmp_path / "minari"))
+    task = "wx-sorting-pickplacedata-v0"
+    ds = load_dataset(task, episodes=1, workers=1, progress=False)
+    export_minari(task, dataset_id="d5rltest/wx-v0", progress=False)
+    md = minari.load_dataset("d5rltest/wx-v0")
+    env = d5rl.make_env(task)
+    assert md.action_space == env.action_space  # Box(-1, 1), not Box(-inf, inf)
+    assert sorted(md.observation_space.spaces) == ["pixels__side", "proprio"]
+    for k, space in md.observation_space.spaces.items():
+        assert space == env.observation_space[d5rl_key(k)]
+    ep = next(md.iterate_episodes())
+    ours = ds.episode(0).arrays
+    np.testing.assert_array_equal(ep.observations["pixels__side"], ours["observations/pixels/side"])  # no JPEG
+    np.testing.assert_array_equal(ep.observations["proprio"], ours["observations/proprio"])
+    recovered = md.recover_environment()
+    obs, _ = recovered.reset(seed=0)
+    assert sorted(obs) == sorted(md.observation_space.spaces) and md.observation_space.contains(obs)
+    assert recovered.spec.max_episode_steps == d5rl.get_spec(task).max_episode_steps
+    recovered.close()
