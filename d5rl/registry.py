@@ -94,7 +94,12 @@ class TaskSpec:
     score_from: str = "return"
     # How the normalized score is defined, for `d5rl info` and the docs.
     score_definition: str = "(return - random) / (expert - random)"
-    tags: tuple[str, ...] = ()
+    # The benchmark group whose settings and table rows this task shares ("kitchen-standard",
+    # "kitchen-randomized", "a1", "wx"); "" = the id's family.  Read by d5rl.settings and the report.
+    group: str = ""
+    # What the agent observes: "state" (a flat float vector) or "pixels" (camera frames +
+    # proprioception).  Picks the settings layer (pixel agents: batch 64, ...) and frame stacking.
+    observation: str = "state"
 
     @property
     def parsed(self) -> TaskId:
@@ -103,6 +108,10 @@ class TaskSpec:
     @property
     def family(self) -> str:
         return self.parsed.family
+
+    @property
+    def benchmark_group(self) -> str:
+        return self.group or self.family
 
 
 _REGISTRY: dict[str, TaskSpec] = {}
@@ -114,6 +123,8 @@ def register(spec: TaskSpec) -> TaskSpec:
     parse_task_id(spec.id)
     if spec.score_from not in ("return", "info"):
         raise ValueError(f"{spec.id}: score_from must be 'return' or 'info', got {spec.score_from!r}")
+    if spec.observation not in ("state", "pixels"):
+        raise ValueError(f"{spec.id}: observation must be 'state' or 'pixels', got {spec.observation!r}")
     if spec.id in _REGISTRY and _REGISTRY[spec.id] != spec:
         raise ValueError(f"task {spec.id} registered twice with different specs")
     _REGISTRY[spec.id] = spec

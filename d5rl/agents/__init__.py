@@ -37,10 +37,15 @@ class UnknownAgentError(D5RLError, KeyError):
         return Exception.__str__(self)
 
 
+def canonical_name(name: str) -> str:
+    """``TD3+BC`` -> ``td3bc``, ``ddpm-bc`` -> ``ddpm_bc``: the names of :data:`AGENTS` (others pass through)."""
+    key = name.strip().lower().replace("-", "_").replace("+", "")
+    return {"td3_bc": "td3bc", "ddpmbc": "ddpm_bc", "cal_ql": "calql"}.get(key, key)
+
+
 def get_agent(name: str):
     """``(AgentClass, get_config)`` for an agent name (``bc``, ``iql``, ``cql``, ...)."""
-    key = name.lower().replace("-", "_").replace("+", "")
-    key = {"td3_bc": "td3bc", "ddpmbc": "ddpm_bc", "cal_ql": "calql"}.get(key, key)
+    key = canonical_name(name)
     if key not in AGENTS:
         raise UnknownAgentError(f"unknown agent {name!r}", f"choose one of {', '.join(AGENTS)}")
     try:

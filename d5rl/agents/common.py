@@ -66,6 +66,10 @@ def check_batch(batch: dict, required=("observations", "actions", "rewards", "ma
 class Agent(flax.struct.PyTreeNode):
     """Base class.  Subclasses declare ``rng``, their train states, ``config`` and ``obs_ndim``."""
 
+    # Whether an offline-to-online run first trains this agent offline (False: RLPD, whose online
+    # batches are half offline data, starts its online phase from scratch and takes no offline steps).
+    offline_pretraining = True
+
     def _update(self, batch):  # pragma: no cover - abstract
         raise NotImplementedError
 

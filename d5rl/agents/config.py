@@ -121,10 +121,21 @@ class Config(Mapping):
         """Apply ``["key=value", ...]`` (strings parsed by type) or a mapping of values."""
         if not assignments:
             return self
-        if isinstance(assignments, Mapping):
-            return self.replace(**dict(assignments))
+        if isinstance(assignments, Mapping):  # text values are parsed like "key=value" strings
+            assignments = [f"{k}={v}" for k, v in assignments.items() if isinstance(v, str)] + \
+                [(k, v) for k, v in assignments.items() if not isinstance(v, str)]
+            return self._apply(assignments)
+        return self._apply(assignments)
+
+    def _apply(self, assignments) -> "Config":
         updates = {}
         for item in assignments:
+            if isinstance(item, tuple):  # (key, value) already typed
+                key, value = item
+                if key not in self._data:
+                    raise ConfigError(f"unknown config key {key!r}", f"known keys: {sorted(self._data)}")
+                updates[key] = value
+                continue
             if "=" not in item:
                 raise ConfigError(f"override {item!r} is not key=value", "write e.g. --set batch_size=128")
             key, text = item.split("=", 1)

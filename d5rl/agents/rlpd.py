@@ -26,6 +26,7 @@ from d5rl.agents.networks import Critic, GaussianPolicy, Temperature, is_pixel_o
 
 
 class RLPDAgent(Agent):
+    offline_pretraining = False  # the D5RL paper's online RLPD run is separate from the offline one
     rng: Any
     actor: Any
     critic: Any

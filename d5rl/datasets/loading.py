@@ -465,4 +465,6 @@ def _open(spec, dspec, seed, root, wanted, partial, in_memory, obs_keys, workers
     if spec.relabel is not None:
         arrays.update(resolve(spec.relabel)(spec, arrays))
     metadata = {**{k: v for k, v in manifest.items() if k != "shards"}, "task_id": spec.id, "root": str(root)}
+    if obs_keys is None and spec.observation == "state":
+        obs_keys = ["observations"]  # a "-state" twin of a camera task: the flat state vector only
     return Dataset(arrays, aligns, lengths, meta, metadata, obs_keys=obs_keys)

@@ -9,9 +9,9 @@ The CLI front door is ``d5rl bench`` / ``d5rl report`` (:mod:`d5rl.runner.cli`).
 """
 
 from d5rl.runner.bench import BenchResult, run_bench
-from d5rl.runner.grid import Cell, expand_grid, find_cells, tuned_settings
+from d5rl.runner.grid import Cell, expand_grid, find_cells
 from d5rl.runner.report import write_report
 from d5rl.runner.stats import iqm, stratified_bootstrap_ci
 
 __all__ = ["BenchResult", "Cell", "expand_grid", "find_cells", "iqm", "run_bench", "stratified_bootstrap_ci",
-           "tuned_settings", "write_report"]
+           "write_report"]

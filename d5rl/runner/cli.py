@@ -4,13 +4,17 @@ and :func:`add_report_parser`."""
 from __future__ import annotations
 
 import argparse
+import json
 import sys
 
 from d5rl.errors import D5RLError
 
 
 def resolve_tasks(names: list[str]) -> list[str]:
-    """Task ids; a family or prefix (``a1``, ``kitchen-standard``) stands for all its registered tasks."""
+    """Task ids; a family or prefix (``a1``, ``kitchen-standard``) stands for all its registered tasks,
+    a glob (``'kitchen-*-state-v0'``) for those it matches."""
+    import fnmatch
+
     from d5rl.registry import TASK_ID_RE, get_spec, list_tasks
 
     try:  # the trainer's numpy toy tasks (toy-reach-v0, ...) are not in the registry
@@ -25,6 +29,11 @@ def resolve_tasks(names: list[str]) -> list[str]:
                 continue
             if part in TOY_TASKS:
                 out.append(part)
+            elif any(c in part for c in "*?["):
+                matches = fnmatch.filter(list_tasks(), part)
+                if not matches:
+                    raise D5RLError(f"no registered task matches {part!r}", "run `d5rl list` to see the task ids")
+                out += matches
             elif TASK_ID_RE.match(part):
                 out.append(get_spec(part).id)  # unknown ids raise with suggestions
             else:
@@ -83,10 +92,10 @@ def cmd_bench(args) -> int:
         protocol["eval_interval"] = args.eval_interval
     cells = expand_grid(tasks, algos, seeds, args.offline_steps, args.online_steps,
                         overrides=parse_assignments(args.set), job=args.job,
-                        tuned=False if args.no_tuned else args.tuned, protocol_overrides=protocol)
+                        tuned=not args.no_tuned, protocol_overrides=protocol)
     if args.dry_run:
         for c in cells:
-            print(c.key, c.overrides, c.protocol)
+            print(c.key, f"offline {c.offline_steps}, online {c.online_steps}", _resolved_summary(c, args.job))
         print(f"{len(cells)} cells")
         return 0
     print(f"{len(tasks)} tasks × {len(algos)} algorithms × {len(seeds)} seeds = {len(cells)} cells -> {args.out}",
@@ -104,6 +113,19 @@ def cmd_bench(args) -> int:
         except ReportError as e:
             print(f"no report: {e.message}", file=sys.stderr)
     return 1 if result.failed else 0
+
+
+def _resolved_summary(cell, job: str) -> str:
+    """What d5rl's trainer will run a cell with (the settings file under the user's values)."""
+    from d5rl.runner.grid import DEFAULT_JOB
+
+    if job != DEFAULT_JOB:
+        return f"{cell.overrides} {cell.protocol}"
+    from d5rl.settings import resolve
+
+    r = resolve(cell.algo, cell.task, {**cell.protocol, **cell.overrides}, offline_steps=cell.offline_steps,
+                online_steps=cell.online_steps, tuned=cell.tuned)
+    return json.dumps({"agent": r.agent.to_dict(), "train": r.train.to_dict()}, sort_keys=True)
 
 
 def cmd_report(args) -> int:
@@ -127,13 +149,14 @@ def add_bench_parser(subparsers) -> argparse.ArgumentParser:
     q.add_argument("--online-steps", type=int, default=0,
                    help="online fine-tuning steps after the offline phase (paper Table 2: 500k)")
     q.add_argument("--set", action="append", metavar="KEY=VALUE",
-                   help="agent-config override for every cell (beats the tuned file); repeatable")
+                   help="agent or training-loop setting for every cell (beats d5rl/configs/settings.json); "
+                        "repeatable")
     q.add_argument("--eval-episodes", type=int, help="evaluation episodes (default: the task family's protocol)")
     q.add_argument("--final-eval-episodes", type=int,
                    help="episodes of the evaluation at the end (default: --eval-episodes, else the family's protocol)")
     q.add_argument("--eval-interval", type=int, help="steps between evaluations (default: the family's protocol)")
-    q.add_argument("--tuned", help="tuned-settings JSON (default: d5rl/configs/tuned.json)")
-    q.add_argument("--no-tuned", action="store_true", help="use the agents' defaults, not the tuned file")
+    q.add_argument("--no-tuned", action="store_true",
+                   help="use the agents' defaults, not d5rl/configs/settings.json")
     q.add_argument("--out", required=True, help="run directory (reuse it to resume)")
     q.add_argument("--workers", type=int, help="local worker processes (default: all cores; 0 = in this process)")
     q.add_argument("--ray", metavar="ADDRESS", help="run on the Ray cluster at ADDRESS ('auto': the one `ray start` runs here; "

@@ -12,15 +12,14 @@ A run directory holds one directory per cell::
         log.txt                       # the job's stdout/stderr
         ...                           # whatever the trainer writes (config, eval logs, checkpoints)
 
-Settings per cell come from three layers: the agent's defaults, the tuned values
-for its (algorithm, task family) in ``d5rl/configs/tuned.json``, and the user's
-``--set key=value`` overrides (highest priority).
+A cell records only what the user chose (``--set`` values, protocol flags, ``tuned``); the
+trainer resolves everything else with :func:`d5rl.settings.resolve`, exactly as ``d5rl train``
+does for the same task and algorithm.
 """
 
 from __future__ import annotations
 
 import dataclasses
-import functools
 import itertools
 import json
 from pathlib import Path
@@ -28,7 +27,6 @@ from typing import Any, Iterable
 
 from d5rl.errors import D5RLError
 
-TUNED_PATH = Path(__file__).resolve().parent.parent / "configs" / "tuned.json"
 DEFAULT_JOB = "d5rl.runner.jobs:train_job"
 CELL_FILE = "cell.json"
 DONE_FILE = "done"
@@ -47,10 +45,7 @@ class GridError(D5RLError, ValueError):
     """A grid that cannot run: unknown algorithm, clash with finished cells, bad tuned file."""
 
 
-def canonical_algo(name: str) -> str:
-    """``TD3+BC`` → ``td3bc``, ``ddpm-bc`` → ``ddpm_bc`` (the names of :data:`d5rl.agents.AGENTS`)."""
-    key = name.strip().lower().replace("-", "_").replace("+", "")
-    return {"td3_bc": "td3bc", "ddpmbc": "ddpm_bc", "cal_ql": "calql"}.get(key, key)
+from d5rl.agents import canonical_name as canonical_algo  # noqa: E402  (one canonicalizer)
 
 
 @dataclasses.dataclass(frozen=True)
@@ -62,9 +57,10 @@ class Cell:
     seed: int
     offline_steps: int
     online_steps: int
-    overrides: dict = dataclasses.field(default_factory=dict)  # agent-config values (tuned + --set)
-    protocol: dict = dataclasses.field(default_factory=dict)  # trainer settings (eval interval, episodes)
+    overrides: dict = dataclasses.field(default_factory=dict)  # the user's --set values (agent or loop keys)
+    protocol: dict = dataclasses.field(default_factory=dict)  # the user's evaluation flags (interval, episodes)
     job: str = DEFAULT_JOB  # "module:function" called as job(cell, cell_dir)
+    tuned: bool = True  # layer d5rl/configs/settings.json under the overrides (False: agent defaults)
 
     @property
     def key(self) -> str:
@@ -82,82 +78,34 @@ class Cell:
         return cls(**{k: v for k, v in d.items() if k in fields})
 
 
-# --------------------------------------------------------------------------- tuned settings
-
-
-@functools.lru_cache(maxsize=4)
-def _load_tuned(path: str) -> dict:
-    try:
-        with open(path) as f:
-            data = json.load(f)
-    except FileNotFoundError as e:
-        raise GridError(f"tuned-settings file {path} not found", "reinstall d5rl or pass --tuned PATH") from e
-    except json.JSONDecodeError as e:
-        raise GridError(f"tuned-settings file {path} is not valid JSON ({e})", "fix the file") from e
-    for section in ("tuned", "protocol"):
-        if not isinstance(data.get(section), dict):
-            raise GridError(f"{path} has no '{section}' table", "see d5rl/configs/tuned.json for the layout")
-    return data
-
-
-def family_key(task_id: str, table: dict) -> str | None:
-    """The longest key of ``table`` that is ``task_id`` or a dash-separated prefix of it."""
-    best = None
-    for key in table:
-        if key.startswith("_"):
-            continue
-        if task_id == key or task_id.startswith(key + "-"):
-            if best is None or len(key) > len(best):
-                best = key
-    return best
-
-
-def tuned_settings(task_id: str, algo: str, path: Path | str | None = None) -> tuple[dict, dict]:
-    """``(agent overrides, trainer protocol)`` for a task and algorithm from the tuned file."""
-    data = _load_tuned(str(path or TUNED_PATH))
-    algo = canonical_algo(algo)
-    fam = family_key(task_id, data["tuned"])
-    overrides = {}
-    if fam is not None:
-        overrides = {k: v for k, v in data["tuned"][fam].get(algo, {}).items() if not k.startswith("_")}
-    pfam = family_key(task_id, data["protocol"])
-    protocol = {}
-    if pfam is not None:
-        protocol = {k: v for k, v in data["protocol"][pfam].items() if not k.startswith("_")}
-    return overrides, protocol
-
-
-def parse_assignments(items: Iterable[str] | None) -> dict[str, Any]:
-    """``["expectile=0.9", "hidden_dims=[512,512]"]`` → values parsed as JSON where possible."""
-    out: dict[str, Any] = {}
+def parse_assignments(items: Iterable[str] | None) -> dict[str, str]:
+    """``["expectile=0.9"]`` -> ``{"expectile": "0.9"}``: the text is kept; the trainer parses it as the type
+    of the setting's default (:meth:`d5rl.agents.config.Config.override`, the one parser)."""
+    out: dict[str, str] = {}
     for item in items or ():
         if "=" not in item:
             raise GridError(f"override {item!r} is not key=value", "write e.g. --set expectile=0.9")
         key, text = item.split("=", 1)
-        try:
-            value = json.loads(text)
-        except json.JSONDecodeError:
-            value = text
-        out[key.strip()] = value
+        out[key.strip()] = text
     return out
 
 
 def expand_grid(tasks: Iterable[str], algos: Iterable[str], seeds: Iterable[int], offline_steps: int,
                 online_steps: int, overrides: dict | None = None, job: str = DEFAULT_JOB,
-                tuned: Path | str | None | bool = None, protocol_overrides: dict | None = None) -> list[Cell]:
-    """All cells of the grid, tuned settings applied (``tuned=False`` skips the tuned file)."""
+                tuned: bool = True, protocol_overrides: dict | None = None) -> list[Cell]:
+    """All cells of the grid.  With d5rl's trainer, agents without an offline phase (RLPD) take no
+    offline steps in an offline-to-online grid (their online batches mix in the offline data)."""
     cells = []
     for task, algo, seed in itertools.product(list(tasks), list(algos), list(seeds)):
         algo = canonical_algo(algo)
-        if tuned is False:
-            tuned_over, protocol = {}, {}
-        else:
-            tuned_over, protocol = tuned_settings(task, algo, tuned or None)
-        cells.append(Cell(
-            task=task, algo=algo, seed=int(seed), offline_steps=int(offline_steps),
-            online_steps=int(online_steps), overrides={**tuned_over, **(overrides or {})},
-            protocol={**protocol, **(protocol_overrides or {})}, job=job,
-        ))
+        offline, online = int(offline_steps), int(online_steps)
+        if job == DEFAULT_JOB:
+            from d5rl.settings import run_steps
+
+            offline, online = run_steps(algo, offline, online)
+        cells.append(Cell(task=task, algo=algo, seed=int(seed), offline_steps=offline, online_steps=online,
+                          overrides=dict(overrides or {}), protocol=dict(protocol_overrides or {}), job=job,
+                          tuned=bool(tuned)))
     keys = [c.key for c in cells]
     dup = {k for k in keys if keys.count(k) > 1}
     if dup:

@@ -39,7 +39,7 @@ METHODS = {
     "bc": "BC", "iql": "IQL", "cql": "CQL", "calql": "CalQL", "td3bc": "TD3+BC", "rlpd": "RLPD",
     "ddpm_bc": "DDPM+BC", "idql": "IDQL",
 }
-# (task-id prefix, environment label) in the paper's row order.
+# (benchmark group, environment label) in the paper's row order.
 ENVIRONMENTS = [
     ("kitchen-standard", "Standard Kitchen"),
     ("kitchen-randomized", "Randomized Kitchen"),
@@ -55,10 +55,14 @@ class ReportError(D5RLError):
 
 
 def environment(task: str) -> str:
-    for prefix, label in ENVIRONMENTS:
-        if task == prefix or task.startswith(prefix + "-"):
-            return label
-    return task.split("-")[0]
+    """The table's environment label of a task: its benchmark group (TaskSpec.group)."""
+    try:
+        from d5rl.settings import task_keys
+
+        group, _ = task_keys(task)
+    except D5RLError:  # a task only a custom job knows
+        group = task.split("-")[0]
+    return dict(ENVIRONMENTS).get(group, group)
 
 
 def _env_order(label: str) -> int:

@@ -17,33 +17,34 @@ def add_train_parser(subparsers) -> argparse.ArgumentParser:
     p.add_argument("algo", choices=sorted(AGENTS), help="agent")
     p.add_argument("task", help="task id (or toy-reach-v0 / toy-reach-pixels-v0)")
     p.add_argument("--offline-steps", type=int, default=None, help="gradient updates on the dataset "
-                   "(default 500000; 0 for RLPD)")
+                   "(default 500000; none for RLPD when fine-tuning online)")
     p.add_argument("--online-steps", type=int, default=0, help="environment steps of online fine-tuning")
     p.add_argument("--seed", type=int, default=0)
     p.add_argument("--set", dest="overrides", action="append", default=[], metavar="KEY=VALUE",
                    help="override a config value (repeatable)")
     p.add_argument("--run-dir", default=None, help="default: runs/TASK/ALGO/seedS")
-    p.add_argument("--show-config", action="store_true", help="print the resolved config and exit")
+    p.add_argument("--show-config", action="store_true",
+                   help="print the config this run would use (d5rl/configs/settings.json under --set) and exit")
     p.set_defaults(func=cmd_train)
     return p
 
 
 def cmd_train(args) -> int:
-    from d5rl.agents import get_agent
-    from d5rl.agents.config import AGENT_BOUNDS, check_bounds
-    from d5rl.training.loop import TRAIN_BOUNDS, get_train_config, split_overrides, train
+    import sys
 
-    _, config_fn = get_agent(args.algo)
-    agent_cfg, train_cfg = split_overrides(args.overrides, config_fn(), get_train_config())
-    check_bounds(agent_cfg, AGENT_BOUNDS)
-    check_bounds(train_cfg, TRAIN_BOUNDS)
+    from d5rl.settings import resolve, run_steps
+    from d5rl.training.loop import check_run, train
+
+    offline, online = run_steps(args.algo, args.offline_steps, args.online_steps)
+    if args.offline_steps and offline != args.offline_steps:
+        print(f"note: {args.algo} has no offline phase before fine-tuning (its online batches mix in the offline "
+              f"data); training {online} online steps only", file=sys.stderr)
+    check_run(offline, online, args.seed)
+    run = resolve(args.algo, args.task, args.overrides, offline_steps=offline, online_steps=online)
     if args.show_config:
-        print(json.dumps({"agent": agent_cfg.to_dict(), "train": train_cfg.to_dict()}, indent=2))
+        print(json.dumps(run.to_json(), indent=2))
         return 0
-    offline = args.offline_steps
-    if offline is None:
-        offline = 0 if agent_cfg.agent_name == "rlpd" and args.online_steps else 500_000
-    res = train(args.algo, args.task, offline, args.online_steps, args.seed, args.overrides, args.run_dir)
+    res = train(args.algo, args.task, offline, online, args.seed, args.overrides, args.run_dir)
     res.pop("agent", None)
     print(json.dumps(res, indent=2))
     return 0

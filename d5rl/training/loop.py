@@ -28,7 +28,7 @@ import jax
 import numpy as np
 
 from d5rl.agents import get_agent
-from d5rl.agents.config import AGENT_BOUNDS, Bound, Config, ConfigError, check_bounds
+from d5rl.agents.config import Bound, Config, ConfigError
 from d5rl.agents.networks import is_pixel_obs
 from d5rl.errors import D5RLError
 from d5rl.training.checkpoint import Checkpoint, load_checkpoint, restore_agent, save_checkpoint
@@ -116,24 +116,6 @@ def split_overrides(overrides, agent_config: Config, train_config: Config) -> tu
     return apply(agent_config, agent_items), apply(train_config, train_items)
 
 
-TASK_OVERRIDES = Path(__file__).with_name("task_overrides.json")
-
-
-def task_overrides(task_id: str, algo: str, pixels: bool, agent_config: Config) -> dict:
-    """Tuned defaults for this task from ``task_overrides.json`` (keys the agent has)."""
-    import fnmatch
-
-    table = json.loads(TASK_OVERRIDES.read_text())
-    out: dict = {}
-    for pattern, per_agent in table.items():
-        if pattern.startswith("_"):
-            continue
-        if (pattern == "pixels" and pixels) or (pattern != "pixels" and fnmatch.fnmatch(task_id, pattern)):
-            for who in ("all", algo):
-                out.update({k: v for k, v in per_agent.get(who, {}).items() if k in agent_config})
-    return {k: tuple(v) if isinstance(v, list) else v for k, v in out.items()}
-
-
 def observation_stats(ds, eps: float = 1e-3) -> tuple[tuple[float, ...], tuple[float, ...]]:
     """Per-dimension mean and std + ``eps`` of a state dataset's observations (TD3+BC's normalization)."""
     obs = np.asarray(ds.observations, dtype=np.float64)
@@ -208,6 +190,7 @@ def train(
     run_dir: str | Path | None = None,
     *,
     dataset=None,
+    tuned: bool = True,
     _stop_at: int | None = None,
 ) -> dict[str, Any]:
     """Train ``algo`` on ``task_id``; returns the final evaluation (also in ``summary.json``).
@@ -217,14 +200,15 @@ def train(
     from the dataset.  RLPD runs its online phase from a freshly initialised agent
     (as in the D5RL paper); every other agent fine-tunes.  ``overrides`` are
     ``key=value`` strings (or a dict) for the agent's or the loop's config
-    (:func:`get_train_config`).  ``dataset`` replaces the task's dataset (tests).
+    (:func:`get_train_config`), layered over the task's settings (:mod:`d5rl.settings`; ``tuned=False``
+    leaves them out).  ``dataset`` replaces the task's dataset (tests).
     """
-    agent_cls, agent_config_fn = get_agent(algo)
-    agent_cfg, cfg = split_overrides(overrides, agent_config_fn(), get_train_config())
+    from d5rl.settings import resolve
+
     check_run(offline_steps, online_steps, seed)
-    check_bounds(agent_cfg, AGENT_BOUNDS)
-    check_bounds(cfg, TRAIN_BOUNDS)
-    algo = agent_cfg.agent_name
+    run = resolve(algo, task_id, overrides, offline_steps=offline_steps, online_steps=online_steps, tuned=tuned)
+    agent_cls, _ = get_agent(run.algo)
+    agent_cfg, cfg, algo = run.agent, run.train, run.algo
     run_dir = Path(run_dir) if run_dir is not None else default_run_dir(algo, task_id, seed)
 
     ds = dataset if dataset is not None else load_task_dataset(
@@ -232,15 +216,10 @@ def train(
     run_dir.mkdir(parents=True, exist_ok=True)
     probe = ds.sample(1, np.random.default_rng(0))
     pixels = is_pixel_obs(probe["observations"])
-    defaults = agent_config_fn()
-    defaults = defaults.replace(**task_overrides(task_id, algo, pixels, defaults))
-    agent_cfg, _ = split_overrides(overrides, defaults, get_train_config())
-    if agent_cfg.get("actor_decay_steps", 0) is None:  # "auto": decay over an offline-only run
-        agent_cfg = agent_cfg.replace(actor_decay_steps=int(offline_steps) if online_steps == 0 else 0)
     if agent_cfg.get("normalize_observations") and not pixels and agent_cfg.obs_mean is None:
         mean, std = observation_stats(ds)
         agent_cfg = agent_cfg.replace(obs_mean=mean, obs_std=std)
-    frame_stack = int(cfg.frame_stack or (3 if pixels else 1))
+    frame_stack = int(cfg.frame_stack)
     needs_mc = algo == "calql"
     gamma = float(agent_cfg.get("discount", 0.99))
     batch_keys = BATCH_KEYS + (("mc_returns",) if needs_mc else ())

@@ -74,18 +74,6 @@ def test_cli_parsers(tmp_path, capsys):
     assert args.episodes == 3 and args.func.__name__ == "cmd_eval"
 
 
-def test_task_overrides_table():
-    from d5rl.agents import get_agent
-    from d5rl.training.loop import task_overrides
-
-    iql_cfg = get_agent("iql")[1]()
-    assert task_overrides("a1-walk-v0", "iql", False, iql_cfg) == {}
-    pix = task_overrides("kitchen-standard-mixed-v0", "iql", True, iql_cfg)
-    assert pix == {"batch_size": 64, "actor_lr": 1e-4, "temperature": 0.5, "expectile": 0.7}
-    td3_cfg = get_agent("td3bc")[1]()
-    assert task_overrides("kitchen-standard-mixed-v0", "td3bc", True, td3_cfg) == {"batch_size": 64, "actor_lr": 1e-4}
-
-
 def test_evaluation_scores_info_scored_tasks_from_the_last_info():
     """Kitchen and WidowX score from info['score'] at the episode's end, not from the return."""
     import d5rl

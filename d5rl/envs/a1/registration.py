@@ -57,7 +57,7 @@ for task_id, speed, dataset in (("a1-walk-v0", 0.75, LOCOMOTION_DATA), ("a1-run-
         score=_ref(task_id, _scores_table),
         score_definition="(return - random policy return) / (expert return - random policy return); "
                          "expert = the best data-collecting agent evaluated on this task (d5rl calibrate)",
-        tags=("state", "locomotion"),
+        group="a1",
     ))
 register(TaskSpec(
     id="a1-hiking-v0",
@@ -70,5 +70,5 @@ register(TaskSpec(
     score=_ref("a1-hiking-v0", _scores_table),
     score_definition="(return - random policy return) / (expert return - random policy return); "
                      "expert = the heading agent evaluated on the course (d5rl calibrate)",
-    tags=("state", "locomotion"),
+    group="a1",
 ))

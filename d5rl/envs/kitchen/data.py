@@ -140,6 +140,24 @@ def render_states(env, states: np.ndarray, cameras: Sequence[str] = DEFAULT_CAME
     return out
 
 
+def state_episode(arrays: dict, meta: dict) -> dict:
+    """``observations``: the ``obs_mode="state"`` observation (30 joint positions) of every stored state."""
+    from d5rl.envs.kitchen.task import KitchenEnv
+
+    if "state" not in _RENDER_ENV:
+        _RENDER_ENV["state"] = KitchenEnv(obs_mode="state")
+    return {"observations": observe_states(_RENDER_ENV["state"], arrays["states"])}
+
+
+def observe_states(env, states) -> np.ndarray:
+    """``env``'s observation of each stored simulator state, stacked (state observations)."""
+    out = []
+    for s in np.asarray(states, dtype=np.float64):
+        env.set_state(s)
+        out.append(env._get_obs())
+    return np.asarray(out, dtype=np.float32)
+
+
 def render_episode(arrays: dict, meta: dict, cameras: Sequence[str] = DEFAULT_CAMERAS, size: int = 64) -> dict:
     """Derived arrays of one stored episode: ``observations/pixels/<camera>``."""
     frames = render_states(_render_env(int(size)), arrays["states"], cameras, int(size))
@@ -148,12 +166,17 @@ def render_episode(arrays: dict, meta: dict, cameras: Sequence[str] = DEFAULT_CA
 
 def renders(spec, root, manifest, *, episodes: int, workers: int | None = None, progress: bool = True,
             cameras: Sequence[str] = DEFAULT_CAMERAS, size: int = 64, render: bool = True) -> list:
-    """``DatasetSpec.derived``: camera frames of the stored states (cached next to the dataset).
+    """``DatasetSpec.derived``: camera frames of the stored states (cached next to the dataset); for a
+    ``-state`` task, its state observations instead.
 
     ``render=False`` loads states and proprioception only."""
     if not render:
         return []
     from d5rl.datasets.render_cache import ensure_render_cache
+
+    if spec is not None and spec.observation == "state":
+        return [ensure_render_cache(root, manifest, "d5rl.envs.kitchen.data:state_episode", {}, name="state",
+                                    episodes=episodes, workers=workers, progress=progress)]
 
     return [ensure_render_cache(root, manifest, "d5rl.envs.kitchen.data:render_episode",
                                 {"cameras": tuple(cameras), "size": int(size)},

@@ -19,24 +19,28 @@ SCORE = (
     "(info['score'] at the episode's end; 1.0 = all four)"
 )
 
+STATE = "30 joint positions (9 robot, 21 objects)"
 for name, tasks, desc in (
     ("mixed", MIXED, "microwave, kettle, light switch, slide cabinet (this set appears in the data)"),
     ("partial", PARTIAL, "microwave, kettle, bottom burner, light switch (never together in the data)"),
 ):
-    register(
-        TaskSpec(
-            id=f"kitchen-standard-{name}-v0",
-            entry_point="d5rl.envs.kitchen.task:KitchenEnv",
-            max_episode_steps=MAX_EPISODE_STEPS,
-            description=f"Franka Kitchen, cameras + proprioception: {desc}",
-            env_kwargs={"tasks": tasks},
-            dataset=STANDARD_DATASET,
-            relabel="d5rl.envs.kitchen.data:relabel",
-            score=None,
-            score_from="info",
-            score_definition=SCORE,
-            tags=("kitchen", "pixels"),
+    # each task twice: from the cameras (the benchmark) and, as "-state", from the joint positions
+    for suffix, obs, what in (("", "pixels", "cameras + proprioception"), ("-state", "state", STATE)):
+        register(
+            TaskSpec(
+                id=f"kitchen-standard-{name}{suffix}-v0",
+                entry_point="d5rl.envs.kitchen.task:KitchenEnv",
+                max_episode_steps=MAX_EPISODE_STEPS,
+                description=f"Franka Kitchen, {what}: {desc}",
+                env_kwargs={"tasks": tasks, **({"obs_mode": "state"} if obs == "state" else {})},
+                dataset=STANDARD_DATASET,
+                relabel="d5rl.envs.kitchen.data:relabel",
+                score=None,
+                score_from="info",
+                score_definition=SCORE,
+                group="kitchen-standard",
+                observation=obs,
+            )
         )
-    )
 
 import d5rl.envs.kitchen.randomized.registration  # noqa: E402,F401  (randomized kitchen ids)

@@ -153,9 +153,26 @@ def render_episode(arrays: dict[str, np.ndarray], meta: dict, size: int = 128) -
     return {"observations/pixels/side": render_states(arrays["states"], meta, size=int(size))}
 
 
+_STATE_ENV = {}
+
+
+def state_episode(arrays: dict[str, np.ndarray], meta: dict) -> dict[str, np.ndarray]:
+    """``observations``: the ``obs_mode="state"`` vector (25) of every stored state, in its domain."""
+    if "env" not in _STATE_ENV:
+        _STATE_ENV["env"] = WidowXSortingEnv(obs_mode="state")
+    env = _STATE_ENV["env"]
+    env.set_domain(wm.Domain.from_json(meta["domain"]))
+    out = []
+    for s in np.asarray(arrays["states"], np.float64):
+        env.set_state(s)
+        out.append(env.state_vector())
+    return {"observations": np.asarray(out, np.float32)}
+
+
 def renders(spec, root, manifest, *, episodes: int, workers: int | None = None, progress: bool = True,
             size: int = 128, render: bool = True) -> list:
-    """``DatasetSpec.derived``: the ``observations/pixels/side`` frames, cached next to the dataset.
+    """``DatasetSpec.derived``: the ``observations/pixels/side`` frames, cached next to the dataset; for a
+    ``-state`` task, its state observations instead.
 
     ``load_dataset(task, size=64)`` renders another resolution; ``render=False`` loads
     states and proprioception only.
@@ -163,6 +180,10 @@ def renders(spec, root, manifest, *, episodes: int, workers: int | None = None, 
     if not render:
         return []
     from d5rl.datasets.render_cache import ensure_render_cache
+
+    if spec is not None and spec.observation == "state":
+        return [ensure_render_cache(root, manifest, "d5rl.envs.widowx.data:state_episode", {}, name="state",
+                                    episodes=episodes, workers=workers, progress=progress)]
 
     return [ensure_render_cache(root, manifest, "d5rl.envs.widowx.data:render_episode", {"size": int(size)},
                                 name=f"side-{int(size)}x{int(size)}", episodes=episodes, workers=workers,

@@ -16,49 +16,47 @@ _SCORE_DEFINITION = (
     "(info['score'] at the episode's end = final-step reward / 2; 1.0 = both sorted)"
 )
 
-register(
-    TaskSpec(
-        id="wx-sorting-v0",
-        entry_point=_ENTRY,
-        max_episode_steps=MAX_EPISODE_STEPS,
-        description="WidowX 250 sorts a shoe and a toy into their bins from a 128x128 side camera + joint positions; "
-        "data: a scripted policy attempting both objects (wrong bin 30% of the time).",
-        dataset=DatasetSpec(
-            name="wx-sorting",
-            version=0,
-            generator=_GENERATOR,
-            num_episodes=2000,
-            episodes_per_shard=25,
-            generator_kwargs={"mode": "sorting", "p_wrong": 0.3},
-            derived=_RENDERS,
-            description="2,000 scripted episodes (120 steps) picking and placing both objects in succession; "
-            "each goes to the wrong bin with probability 0.3. States + proprio; camera frames are re-rendered.",
-        ),
-        score_from="info",
-        score_definition=_SCORE_DEFINITION,
-        tags=("pixels", "multi-stage", "scripted"),
-    )
+SORTING_DATA = DatasetSpec(
+    name="wx-sorting",
+    version=0,
+    generator=_GENERATOR,
+    num_episodes=2000,
+    episodes_per_shard=25,
+    generator_kwargs={"mode": "sorting", "p_wrong": 0.3},
+    derived=_RENDERS,
+    description="2,000 scripted episodes (120 steps) picking and placing both objects in succession; "
+    "each goes to the wrong bin with probability 0.3. States + proprio; camera frames are re-rendered.",
 )
+PICKPLACE_DATA = DatasetSpec(
+    name="wx-pickplace",
+    version=0,
+    generator=_GENERATOR,
+    num_episodes=2000,
+    episodes_per_shard=50,
+    generator_kwargs={"mode": "pickplace", "p_wrong": 0.3},
+    derived=_RENDERS,
+    description="2,000 scripted episodes (60 steps) picking one of the two objects and placing it "
+    "(correct bin with probability 0.7). States + proprio; camera frames are re-rendered.",
+)
+STATE = "joint positions, tip and object poses (25)"
 
-register(
-    TaskSpec(
-        id="wx-sorting-pickplacedata-v0",
-        entry_point=_ENTRY,
-        max_episode_steps=MAX_EPISODE_STEPS,
-        description="The wx-sorting task learned from single pick-and-place episodes: the agent must chain two.",
-        dataset=DatasetSpec(
-            name="wx-pickplace",
-            version=0,
-            generator=_GENERATOR,
-            num_episodes=2000,
-            episodes_per_shard=50,
-            generator_kwargs={"mode": "pickplace", "p_wrong": 0.3},
-            derived=_RENDERS,
-            description="2,000 scripted episodes (60 steps) picking one of the two objects and placing it "
-            "(correct bin with probability 0.7). States + proprio; camera frames are re-rendered.",
-        ),
-        score_from="info",
-        score_definition=_SCORE_DEFINITION,
-        tags=("pixels", "multi-stage", "scripted"),
-    )
-)
+for name, dataset, desc in (
+    ("sorting", SORTING_DATA, "data: a scripted policy attempting both objects (wrong bin 30% of the time)."),
+    ("sorting-pickplacedata", PICKPLACE_DATA, "the agent must chain two of the data's single pick-and-places."),
+):
+    # each task twice: from the side camera (the benchmark) and, as "-state", from simulator state
+    for suffix, obs, what in (("", "pixels", "a 128x128 side camera + joint positions"), ("-state", "state", STATE)):
+        register(
+            TaskSpec(
+                id=f"wx-{name}{suffix}-v0",
+                entry_point=_ENTRY,
+                max_episode_steps=MAX_EPISODE_STEPS,
+                description=f"WidowX 250 sorts a shoe and a toy into their bins from {what}; {desc}",
+                env_kwargs={"obs_mode": "state"} if obs == "state" else {},
+                dataset=dataset,
+                score_from="info",
+                score_definition=_SCORE_DEFINITION,
+                group="wx",
+                observation=obs,
+            )
+        )

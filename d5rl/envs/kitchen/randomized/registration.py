@@ -29,18 +29,20 @@ for task_name, dataset_mode, tasks, n, desc in (
     ("partial", "play", PARTIAL, 1000, "play data; the partial task's four objects never together (paper: 1,000)"),
     ("suboptimal", "suboptimal", MIXED, 500, "unskilled operators on the mixed subtasks (not benchmarked; paper: 500)"),
 ):
-    register(
-        TaskSpec(
-            id=f"kitchen-randomized-{task_name}-v0",
-            entry_point="d5rl.envs.kitchen.randomized.task:RandomizedKitchenEnv",
-            max_episode_steps=MAX_EPISODE_STEPS,
-            description=f"Randomized Franka Kitchen (new domain every reset), 3 cameras 128x128: {desc}",
-            env_kwargs={"tasks": tasks},
-            dataset=_dataset(dataset_mode, n, desc),
-            relabel="d5rl.envs.kitchen.data:relabel",
-            score=None,
-            score_from="info",
-            score_definition=SCORE,
-            tags=("kitchen", "pixels", "randomized"),
+    for suffix, obs, what in (("", "pixels", "3 cameras 128x128"), ("-state", "state", "30 joint positions")):
+        register(
+            TaskSpec(
+                id=f"kitchen-randomized-{task_name}{suffix}-v0",
+                entry_point="d5rl.envs.kitchen.randomized.task:RandomizedKitchenEnv",
+                max_episode_steps=MAX_EPISODE_STEPS,
+                description=f"Randomized Franka Kitchen (new domain every reset), {what}: {desc}",
+                env_kwargs={"tasks": tasks, **({"obs_mode": "state"} if obs == "state" else {})},
+                dataset=_dataset(dataset_mode, n, desc),
+                relabel="d5rl.envs.kitchen.data:relabel",
+                score=None,
+                score_from="info",
+                score_definition=SCORE,
+                group="kitchen-randomized",
+                observation=obs,
+            )
         )
-    )

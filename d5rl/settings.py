@@ -1,0 +1,111 @@
+"""Per-task settings: one file (``d5rl/configs/settings.json``), one resolver.
+
+Every command that trains or describes a run resolves its configuration here, so
+``d5rl train``, ``d5rl bench``, ``--show-config`` and the ``config.json`` that ``d5rl eval``
+reads can never disagree.  Layers, lowest first:
+
+agent config
+    the agent's ``get_config()`` defaults; ``observations[obs]`` ("all", then the algorithm);
+    ``groups[group][obs]`` ("all", then the algorithm); the user's ``--set`` values.
+training-loop config
+    :func:`d5rl.training.loop.get_train_config` defaults; ``protocol[group]``; ``--set``;
+    then what follows from the task (``frame_stack`` 3 for pixels, 1 for states) and the run
+    (IQL's "auto" policy-lr decay: over the offline steps of an offline-only run).
+
+``group`` and ``obs`` are the task's :attr:`~d5rl.registry.TaskSpec.benchmark_group` and
+:attr:`~d5rl.registry.TaskSpec.observation`.
+"""
+
+from __future__ import annotations
+
+import dataclasses
+import functools
+import json
+from pathlib import Path
+from typing import Any, Iterable, Mapping
+
+SETTINGS_PATH = Path(__file__).resolve().parent / "configs" / "settings.json"
+
+
+@functools.lru_cache(maxsize=1)
+def table() -> dict:
+    return json.loads(SETTINGS_PATH.read_text())
+
+
+def _plain(d: Mapping | None) -> dict:
+    return {k: v for k, v in (d or {}).items() if not k.startswith("_")}
+
+
+def task_keys(task_id: str) -> tuple[str, str]:
+    """``(group, observation)`` of a task (the trainer's numpy toy tasks included)."""
+    from d5rl.training.toy import TOY_TASKS
+
+    if task_id in TOY_TASKS:
+        return "toy", "pixels" if "pixels" in task_id else "state"
+    from d5rl.registry import get_spec
+
+    spec = get_spec(task_id)
+    return spec.benchmark_group, spec.observation
+
+
+def layers(task_id: str, algo: str) -> tuple[dict, dict]:
+    """``(agent values, training-loop values)`` the settings file gives a task and algorithm."""
+    from d5rl.agents import canonical_name
+
+    algo = canonical_name(algo)
+    group, obs = task_keys(task_id)
+    data = table()
+    agent: dict[str, Any] = {}
+    for section in (data["observations"].get(obs, {}), data["groups"].get(group, {}).get(obs, {})):
+        agent.update(_plain(section.get("all")))
+        agent.update(_plain(section.get(algo)))
+    return agent, _plain(data["protocol"].get(group))
+
+
+@dataclasses.dataclass(frozen=True)
+class Resolved:
+    """Everything a run is configured by."""
+
+    algo: str
+    task_id: str
+    agent: Any  # d5rl.agents.config.Config
+    train: Any  # d5rl.agents.config.Config
+    offline_steps: int
+    online_steps: int
+
+    def to_json(self) -> dict:
+        return {"algo": self.algo, "task_id": self.task_id, "offline_steps": self.offline_steps,
+                "online_steps": self.online_steps, "agent": self.agent.to_dict(), "train": self.train.to_dict()}
+
+
+def resolve(algo: str, task_id: str, overrides: Iterable[str] | Mapping[str, Any] | None = None, *,
+            offline_steps: int = 0, online_steps: int = 0, tuned: bool = True) -> Resolved:
+    """The agent and training-loop configs of one run (``tuned=False``: the agent's own defaults)."""
+    from d5rl.agents import get_agent
+    from d5rl.agents.config import AGENT_BOUNDS, check_bounds
+    from d5rl.training.loop import TRAIN_BOUNDS, get_train_config, split_overrides
+
+    agent_cls, config_fn = get_agent(algo)
+    agent_layer, train_layer = layers(task_id, algo) if tuned else ({}, {})
+    agent_cfg, train_cfg = config_fn().override(agent_layer), get_train_config().override(train_layer)
+    agent_cfg, train_cfg = split_overrides(overrides, agent_cfg, train_cfg)
+    check_bounds(agent_cfg, AGENT_BOUNDS)
+    check_bounds(train_cfg, TRAIN_BOUNDS)
+    _, obs = task_keys(task_id)
+    if train_cfg.frame_stack is None:
+        train_cfg = train_cfg.replace(frame_stack=3 if obs == "pixels" else 1)
+    if agent_cfg.get("actor_decay_steps", 0) is None:  # "auto": decay over an offline-only run
+        agent_cfg = agent_cfg.replace(actor_decay_steps=int(offline_steps) if online_steps == 0 else 0)
+    return Resolved(agent_cfg.agent_name, task_id, agent_cfg, train_cfg, int(offline_steps), int(online_steps))
+
+
+def run_steps(algo: str, offline_steps: int | None, online_steps: int) -> tuple[int, int]:
+    """``(offline, online)`` steps a run really takes: agents that learn from the data only inside their
+    online phase (RLPD: its online batches are half offline data) skip the offline phase of an
+    offline-to-online run; ``None`` offline steps means the paper's 500k (or 0 for those agents)."""
+    from d5rl.agents import get_agent
+
+    pretrains = getattr(get_agent(algo)[0], "offline_pretraining", True)
+    if online_steps > 0 and not pretrains:
+        return 0, int(online_steps)
+    return (500_000 if offline_steps is None else int(offline_steps)), int(online_steps)
