@@ -8,9 +8,10 @@ agent config
     the agent's ``get_config()`` defaults; ``observations[obs]`` ("all", then the algorithm);
     ``groups[group][obs]`` ("all", then the algorithm); the user's ``--set`` values.
 training-loop config
-    :func:`d5rl.training.loop.get_train_config` defaults; ``protocol[group]``; ``--set``;
-    then what follows from the task (``frame_stack`` 3 for pixels, 1 for states) and the run
-    (IQL's "auto" policy-lr decay: over the offline steps of an offline-only run).
+    :func:`d5rl.training.config.get_train_config` defaults; ``protocol[group]``; ``--set``;
+    then what follows from the task (``frame_stack`` 3 for pixels, 1 for states) and, through the
+    agent's :meth:`~d5rl.agents.common.Agent.resolve_config`, from the run's length (IQL's "auto"
+    policy-lr decay over the offline steps of an offline-only run).
 
 ``group`` and ``obs`` are the task's :attr:`~d5rl.registry.TaskSpec.benchmark_group` and
 :attr:`~d5rl.registry.TaskSpec.observation`.
@@ -37,11 +38,7 @@ def _plain(d: Mapping | None) -> dict:
 
 
 def task_keys(task_id: str) -> tuple[str, str]:
-    """``(group, observation)`` of a task (the trainer's numpy toy tasks included)."""
-    from d5rl.training.toy import TOY_TASKS
-
-    if task_id in TOY_TASKS:
-        return "toy", "pixels" if "pixels" in task_id else "state"
+    """``(group, observation)`` of a task."""
     from d5rl.registry import get_spec
 
     spec = get_spec(task_id)
@@ -83,7 +80,7 @@ def resolve(algo: str, task_id: str, overrides: Iterable[str] | Mapping[str, Any
     """The agent and training-loop configs of one run (``tuned=False``: the agent's own defaults)."""
     from d5rl.agents import get_agent
     from d5rl.agents.config import AGENT_BOUNDS, check_bounds
-    from d5rl.training.loop import TRAIN_BOUNDS, get_train_config, split_overrides
+    from d5rl.training.config import TRAIN_BOUNDS, get_train_config, split_overrides
 
     agent_cls, config_fn = get_agent(algo)
     agent_layer, train_layer = layers(task_id, algo) if tuned else ({}, {})
@@ -94,8 +91,7 @@ def resolve(algo: str, task_id: str, overrides: Iterable[str] | Mapping[str, Any
     _, obs = task_keys(task_id)
     if train_cfg.frame_stack is None:
         train_cfg = train_cfg.replace(frame_stack=3 if obs == "pixels" else 1)
-    if agent_cfg.get("actor_decay_steps", 0) is None:  # "auto": decay over an offline-only run
-        agent_cfg = agent_cfg.replace(actor_decay_steps=int(offline_steps) if online_steps == 0 else 0)
+    agent_cfg = agent_cls.resolve_config(agent_cfg, offline_steps=int(offline_steps), online_steps=int(online_steps))
     return Resolved(agent_cfg.agent_name, task_id, agent_cfg, train_cfg, int(offline_steps), int(online_steps))
 
 

@@ -12,7 +12,7 @@ from d5rl.cli import main  # noqa: E402
 from d5rl.runner import jobs  # noqa: E402
 from d5rl.runner.grid import expand_grid, parse_assignments  # noqa: E402
 from d5rl.settings import resolve, run_steps, table  # noqa: E402
-from d5rl.training.loop import get_train_config  # noqa: E402
+from d5rl.training.config import get_train_config  # noqa: E402
 
 TASKS = [t for t in d5rl.list_tasks() if not t.startswith("test-")]
 
@@ -105,7 +105,7 @@ def test_rlpd_takes_no_offline_steps_before_fine_tuning(capsys):
 
 def test_a_run_records_the_resolved_config_that_eval_reads(tmp_path):
     from d5rl.training.loop import load_run, train
-    from d5rl.training.toy import toy_dataset
+    from d5rl.envs.toy.data import toy_dataset
 
     over = ["hidden_dims=16,16", "eval_episodes=1", "eval_envs=1", "progress=false", "tensorboard=false"]
     train("iql", "toy-reach-v0", 16, 0, 0, over, tmp_path / "run", dataset=toy_dataset(4))

@@ -14,7 +14,7 @@ from __future__ import annotations
 import jax
 import jax.numpy as jnp
 
-from d5rl.agents.networks import pixel_keys
+from d5rl.agents.encoders import pixel_keys
 
 
 def random_shift(key, imgs, pad: int = 4):

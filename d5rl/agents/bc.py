@@ -16,7 +16,8 @@ import jax
 from d5rl.agents.augment import augment_batch
 from d5rl.agents.common import ENCODER_DEFAULTS, Agent, make_train_state, nonpytree_field, obs_ndims, prepare_example
 from d5rl.agents.config import Config
-from d5rl.agents.networks import GaussianPolicy, make_encoder
+from d5rl.agents.networks import GaussianPolicy
+from d5rl.agents.encoders import make_encoder
 
 
 class BCAgent(Agent):

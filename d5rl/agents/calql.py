@@ -20,6 +20,7 @@ from d5rl.agents.cql import get_config as cql_config
 
 
 class CalQLAgent(CQLAgent):
+    extra_batch_keys = ("mc_returns",)  # Monte-Carlo returns of the data (and of finished online episodes)
     def bound_policy_q(self, q, batch):
         if "mc_returns" not in batch:
             raise KeyError("Cal-QL needs batch['mc_returns'] (sample the dataset with mc_gamma=discount)")

@@ -57,18 +57,54 @@ def make_train_state(module: nn.Module, key, inputs: tuple, lr: float | optax.Sc
     return state.replace(step=jnp.zeros((), jnp.int32))
 
 
-def check_batch(batch: dict, required=("observations", "actions", "rewards", "masks", "next_observations")):
-    missing = [k for k in required if k not in batch]
-    if missing:
-        raise KeyError(f"batch is missing {missing}; it has {sorted(batch)}")
-
-
 class Agent(flax.struct.PyTreeNode):
-    """Base class.  Subclasses declare ``rng``, their train states, ``config`` and ``obs_ndim``."""
+    """Base class.  Subclasses declare ``rng``, their train states, ``config`` and ``obs_ndim``.
+
+    What differs between algorithms in how they are trained lives here, as class attributes and
+    hooks the training loop calls, never as name checks in the loop.
+    """
 
     # Whether an offline-to-online run first trains this agent offline (False: RLPD, whose online
     # batches are half offline data, starts its online phase from scratch and takes no offline steps).
     offline_pretraining = True
+    # Batch keys beyond observations/actions/rewards/masks/next_observations ("mc_returns": CalQL).
+    extra_batch_keys = ()  # (a class attribute, not a field)
+
+    # --- configuration hooks --------------------------------------------------------------------
+    @classmethod
+    def resolve_config(cls, config: Config, *, offline_steps: int, online_steps: int) -> Config:
+        """The config of a run of this length (e.g. "auto" learning-rate schedules); identity here."""
+        return config
+
+    @classmethod
+    def fit_config(cls, config: Config, dataset) -> Config:
+        """The config completed from the training data (e.g. observation statistics); identity here."""
+        return config
+
+    # --- how the loop feeds the agent ---------------------------------------------------------------
+    def samples_per_update(self) -> int:
+        """Transitions one :meth:`update` consumes."""
+        return int(self.config.batch_size)
+
+    def online_split(self, offline_ratio: float) -> tuple[int, int]:
+        """``(offline, online)`` transitions of one online-phase update."""
+        n = self.samples_per_update()
+        n_off = int(round(n * offline_ratio))
+        return n_off, n - n_off
+
+    def mix_online(self, offline: dict, online: dict) -> dict:
+        """One online-phase batch from its offline and online parts (concatenated)."""
+        return jax.tree_util.tree_map(lambda x, y: np.concatenate([x, y]), offline, online)
+
+    @property
+    def default_offline_ratio(self) -> float:
+        """Share of every online-phase batch drawn from the offline data (loop setting ``offline_ratio``)."""
+        return 0.5
+
+    @property
+    def default_start_steps(self) -> int:
+        """Random-action environment steps before online updates (loop setting ``start_steps``)."""
+        return 0
 
     def _update(self, batch):  # pragma: no cover - abstract
         raise NotImplementedError
@@ -128,6 +164,31 @@ class Agent(flax.struct.PyTreeNode):
     def from_bytes(self, data: bytes):
         """Restore state saved by :meth:`to_bytes` into an agent created with the same config."""
         return flax.serialization.from_bytes(self, data)
+
+
+def auto_actor_decay(cls, config: Config, *, offline_steps: int, online_steps: int) -> Config:
+    """A :meth:`Agent.resolve_config` (``resolve_config = classmethod(auto_actor_decay)``):
+    ``actor_decay_steps=None`` ("auto") makes the policy lr decay to 0 over an offline-only run (IQL's and
+    IDQL's reference implementations) and stay constant when the run fine-tunes online."""
+    if config.actor_decay_steps is None:
+        return config.replace(actor_decay_steps=int(offline_steps) if online_steps == 0 else 0)
+    return config
+
+
+def sac_train_states(config: Config, keys, ex_obs, ex_act, critic_dropout: float | None = None):
+    """``(actor, critic, temperature)`` train states of a SAC-style agent (CQL, CalQL, RLPD): a tanh-squashed
+    Gaussian policy, a critic ensemble and the entropy temperature, from three keys."""
+    from d5rl.agents.encoders import make_encoder
+    from d5rl.agents.networks import Critic, GaussianPolicy, Temperature
+
+    k_actor, k_critic, k_temp = keys
+    actor_def = GaussianPolicy(make_encoder(config), config.hidden_dims, ex_act.shape[-1], tanh_squash=True,
+                               log_std_min=config.log_std_min, log_std_max=config.log_std_max)
+    critic_def = Critic(make_encoder(config), config.hidden_dims, config.num_qs, config.critic_layer_norm,
+                        critic_dropout)
+    return (make_train_state(actor_def, k_actor, (ex_obs,), config.actor_lr),
+            make_train_state(critic_def, k_critic, (ex_obs, ex_act), config.critic_lr),
+            make_train_state(Temperature(config.init_temperature), k_temp, (), config.temp_lr))
 
 
 def split_utd(batch, utd: int):

@@ -20,9 +20,10 @@ import jax
 import jax.numpy as jnp
 
 from d5rl.agents.augment import augment_batch
-from d5rl.agents.common import copy_tree, ENCODER_DEFAULTS, Agent, make_train_state, nonpytree_field, obs_ndims, prepare_example
+from d5rl.agents.common import (ENCODER_DEFAULTS, Agent, copy_tree, nonpytree_field, obs_ndims, prepare_example,
+                                sac_train_states)
 from d5rl.agents.config import Config
-from d5rl.agents.networks import Critic, GaussianPolicy, Temperature, make_encoder, soft_update
+from d5rl.agents.networks import soft_update
 
 
 class CQLAgent(Agent):
@@ -118,13 +119,8 @@ class CQLAgent(Agent):
         ex_obs, ex_act = prepare_example(example_observations, example_actions)
         if config.target_entropy is None:
             config = config.replace(target_entropy=-float(ex_act.shape[-1]))
-        rng, k_a, k_c, k_t = jax.random.split(jax.random.PRNGKey(seed), 4)
-        actor_def = GaussianPolicy(make_encoder(config), config.hidden_dims, ex_act.shape[-1], tanh_squash=True,
-                                   log_std_min=config.log_std_min, log_std_max=config.log_std_max)
-        critic_def = Critic(make_encoder(config), config.hidden_dims, config.num_qs, config.critic_layer_norm)
-        actor = make_train_state(actor_def, k_a, (ex_obs,), config.actor_lr)
-        critic = make_train_state(critic_def, k_c, (ex_obs, ex_act), config.critic_lr)
-        temp = make_train_state(Temperature(config.init_temperature), k_t, (), config.temp_lr)
+        rng, *keys = jax.random.split(jax.random.PRNGKey(seed), 4)
+        actor, critic, temp = sac_train_states(config, keys, ex_obs, ex_act)
         return cls(rng=rng, actor=actor, critic=critic, target_critic_params=copy_tree(critic.params), temp=temp,
                    config=config, obs_ndim=obs_ndims(ex_obs))
 

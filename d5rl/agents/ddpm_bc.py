@@ -18,9 +18,11 @@ import jax.numpy as jnp
 import optax
 
 from d5rl.agents.augment import augment_batch
-from d5rl.agents.common import copy_tree, ENCODER_DEFAULTS, Agent, make_train_state, nonpytree_field, obs_ndims, prepare_example
+from d5rl.agents.common import Agent, ENCODER_DEFAULTS, auto_actor_decay, copy_tree, make_train_state, nonpytree_field, obs_ndims, prepare_example
 from d5rl.agents.config import Config
-from d5rl.agents.networks import DiffusionNoiseModel, cosine_beta_schedule, make_encoder, soft_update
+from d5rl.agents.networks import soft_update
+from d5rl.agents.encoders import make_encoder
+from d5rl.agents.diffusion import cosine_beta_schedule, DiffusionNoiseModel
 
 
 def schedule(num_steps: int):
@@ -90,17 +92,33 @@ def diffusion_config() -> dict:
     )
 
 
-class DDPMBCAgent(Agent):
-    rng: Any
-    actor: Any
-    target_actor_params: Any
-    config: Config = nonpytree_field()
-    obs_ndim: tuple = nonpytree_field()
+class DiffusionPolicy:
+    """The diffusion actor's part of DDPM+BC and IDQL: its denoising loss, its lr schedule (IDQL decays
+    it over an offline-only run), and acting through ``_act(obs, seed, temperature)`` (sampling and
+    evaluation both draw from the policy; evaluation at temperature 1)."""
+
+    resolve_config = classmethod(auto_actor_decay)  # actor_decay_steps=None: decay over an offline-only run
 
     def actor_loss(self, actor_params, batch, key):
         loss = diffusion_loss(self.actor.apply_fn, actor_params, batch["observations"], batch["actions"], key,
                               self.config.diffusion_steps)
         return loss, {"actor/loss": loss}
+
+    @jax.jit
+    def _sample(self, obs, seed, temperature=1.0):
+        return self._act(obs, seed, temperature)
+
+    @jax.jit
+    def _eval(self, obs, seed):
+        return self._act(obs, seed, 1.0)
+
+
+class DDPMBCAgent(DiffusionPolicy, Agent):
+    rng: Any
+    actor: Any
+    target_actor_params: Any
+    config: Config = nonpytree_field()
+    obs_ndim: tuple = nonpytree_field()
 
     def _update(self, batch):
         rng, aug_key, key = jax.random.split(self.rng, 3)
@@ -115,14 +133,6 @@ class DDPMBCAgent(Agent):
         feats = self.actor.apply_fn({"params": p}, obs, method="encode")
         return ddpm_sample(self.actor.apply_fn, p, feats, seed, self.config.action_dim, self.config.diffusion_steps,
                            self.config.clip_sampler, temperature)
-
-    @jax.jit
-    def _sample(self, obs, seed, temperature=1.0):
-        return self._act(obs, seed, temperature)
-
-    @jax.jit
-    def _eval(self, obs, seed):
-        return self._act(obs, seed, 1.0)
 
     @classmethod
     def create(cls, seed: int, example_observations, example_actions, config: Config | None = None):

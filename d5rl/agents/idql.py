@@ -17,14 +17,15 @@ import jax
 import jax.numpy as jnp
 
 from d5rl.agents.augment import augment_batch
-from d5rl.agents.common import copy_tree, ENCODER_DEFAULTS, Agent, make_train_state, nonpytree_field, obs_ndims, prepare_example
+from d5rl.agents.common import Agent, ENCODER_DEFAULTS, copy_tree, make_train_state, nonpytree_field, obs_ndims, prepare_example
 from d5rl.agents.config import Config
-from d5rl.agents.ddpm_bc import diffusion_config, diffusion_loss, ddpm_sample, make_diffusion_actor
-from d5rl.agents.iql import iql_critic_loss, iql_value_loss
-from d5rl.agents.networks import Critic, ValueCritic, make_encoder, soft_update
+from d5rl.agents.ddpm_bc import DiffusionPolicy, ddpm_sample, diffusion_config, make_diffusion_actor
+from d5rl.agents.iql import IQLLosses
+from d5rl.agents.networks import Critic, soft_update, ValueCritic
+from d5rl.agents.encoders import make_encoder
 
 
-class IDQLAgent(Agent):
+class IDQLAgent(DiffusionPolicy, IQLLosses, Agent):
     rng: Any
     actor: Any
     target_actor_params: Any
@@ -33,17 +34,6 @@ class IDQLAgent(Agent):
     value: Any
     config: Config = nonpytree_field()
     obs_ndim: tuple = nonpytree_field()
-
-    def value_loss(self, value_params, batch):
-        return iql_value_loss(self, value_params, batch)
-
-    def critic_loss(self, critic_params, batch):
-        return iql_critic_loss(self, critic_params, batch)
-
-    def actor_loss(self, actor_params, batch, key):
-        loss = diffusion_loss(self.actor.apply_fn, actor_params, batch["observations"], batch["actions"], key,
-                              self.config.diffusion_steps)
-        return loss, {"actor/loss": loss}
 
     def _update(self, batch):
         rng, aug_key, key = jax.random.split(self.rng, 3)
@@ -73,14 +63,6 @@ class IDQLAgent(Agent):
         q = self.critic.apply_fn({"params": self.target_critic_params}, q_feats, actions, method="head").min(0)
         best = jnp.argmax(q.reshape(b, n), axis=1)
         return actions.reshape(b, n, -1)[jnp.arange(b), best]
-
-    @jax.jit
-    def _sample(self, obs, seed, temperature=1.0):
-        return self._act(obs, seed, temperature)
-
-    @jax.jit
-    def _eval(self, obs, seed):
-        return self._act(obs, seed, 1.0)
 
     @classmethod
     def create(cls, seed: int, example_observations, example_actions, config: Config | None = None):

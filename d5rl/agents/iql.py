@@ -17,9 +17,10 @@ import jax.numpy as jnp
 import optax
 
 from d5rl.agents.augment import augment_batch
-from d5rl.agents.common import copy_tree, ENCODER_DEFAULTS, Agent, make_train_state, nonpytree_field, obs_ndims, prepare_example
+from d5rl.agents.common import Agent, ENCODER_DEFAULTS, auto_actor_decay, copy_tree, make_train_state, nonpytree_field, obs_ndims, prepare_example
 from d5rl.agents.config import Config
-from d5rl.agents.networks import Critic, GaussianPolicy, ValueCritic, make_encoder, soft_update
+from d5rl.agents.networks import Critic, GaussianPolicy, soft_update, ValueCritic
+from d5rl.agents.encoders import make_encoder
 
 
 def expectile_loss(diff, expectile: float):
@@ -28,31 +29,34 @@ def expectile_loss(diff, expectile: float):
     return weight * diff**2
 
 
-def iql_value_loss(agent, value_params, batch):
-    """Shared by IQL and IDQL: expectile regression of V(s) onto min_i Q_target_i(s, a)."""
-    q = agent.critic.apply_fn({"params": agent.target_critic_params}, batch["observations"], batch["actions"]).min(0)
-    v = agent.value.apply_fn({"params": value_params}, batch["observations"])
-    loss = expectile_loss(q - v, agent.config.expectile).mean()
-    return loss, {"value/loss": loss, "value/v": v.mean()}
+class IQLLosses:
+    """IQL's value and Q losses (IQL and IDQL): the agent has ``critic``, ``target_critic_params``,
+    ``value`` and a config with ``expectile`` and ``discount``."""
 
+    def value_loss(self, value_params, batch):
+        """Expectile regression of V(s) onto min_i Q_target_i(s, a)."""
+        q = self.critic.apply_fn({"params": self.target_critic_params}, batch["observations"], batch["actions"]).min(0)
+        v = self.value.apply_fn({"params": value_params}, batch["observations"])
+        loss = expectile_loss(q - v, self.config.expectile).mean()
+        return loss, {"value/loss": loss, "value/v": v.mean()}
 
-def iql_critic_loss(agent, critic_params, batch):
-    """Shared by IQL and IDQL: Q(s, a) → r + γ·mask·V(s'), summed over the ensemble."""
-    next_v = agent.value.apply_fn({"params": agent.value.params}, batch["next_observations"])
-    target = batch["rewards"] + agent.config.discount * batch["masks"] * next_v
-    qs = agent.critic.apply_fn({"params": critic_params}, batch["observations"], batch["actions"])
-    loss = ((qs - target[None]) ** 2).mean(axis=1).sum()
-    return loss, {"critic/loss": loss, "critic/q": qs.mean(), "critic/target_q": target.mean()}
+    def critic_loss(self, critic_params, batch):
+        """Q(s, a) → r + γ·mask·V(s'), summed over the ensemble."""
+        next_v = self.value.apply_fn({"params": self.value.params}, batch["next_observations"])
+        target = batch["rewards"] + self.config.discount * batch["masks"] * next_v
+        qs = self.critic.apply_fn({"params": critic_params}, batch["observations"], batch["actions"])
+        loss = ((qs - target[None]) ** 2).mean(axis=1).sum()
+        return loss, {"critic/loss": loss, "critic/q": qs.mean(), "critic/target_q": target.mean()}
 
 
 def actor_schedule(config: Config):
     """The policy's lr: cosine decay to 0 over ``actor_decay_steps`` updates (IQL's reference
     implementation, offline runs), or constant when that is 0 or None."""
-    steps = config.get("actor_decay_steps")  # absent in runs saved before it existed
+    steps = config.actor_decay_steps
     return optax.cosine_decay_schedule(config.actor_lr, int(steps)) if steps else config.actor_lr
 
 
-class IQLAgent(Agent):
+class IQLAgent(IQLLosses, Agent):
     rng: Any
     actor: Any
     critic: Any
@@ -61,11 +65,7 @@ class IQLAgent(Agent):
     config: Config = nonpytree_field()
     obs_ndim: tuple = nonpytree_field()
 
-    def value_loss(self, value_params, batch):
-        return iql_value_loss(self, value_params, batch)
-
-    def critic_loss(self, critic_params, batch):
-        return iql_critic_loss(self, critic_params, batch)
+    resolve_config = classmethod(auto_actor_decay)  # actor_decay_steps=None: decay over an offline-only run
 
     def actor_loss(self, actor_params, batch, key):
         q = self.critic.apply_fn({"params": self.target_critic_params}, batch["observations"], batch["actions"]).min(0)

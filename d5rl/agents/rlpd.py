@@ -17,12 +17,14 @@ from __future__ import annotations
 from typing import Any
 
 import jax
+import numpy as np
 
 from d5rl.agents.augment import augment_batch
-from d5rl.agents.common import (copy_tree, ENCODER_DEFAULTS, Agent, make_train_state, nonpytree_field,
-                                obs_ndims, prepare_example, split_utd)
+from d5rl.agents.common import (ENCODER_DEFAULTS, Agent, copy_tree, nonpytree_field, obs_ndims, prepare_example,
+                                sac_train_states, split_utd)
 from d5rl.agents.config import Config
-from d5rl.agents.networks import Critic, GaussianPolicy, Temperature, is_pixel_obs, make_encoder, soft_update
+from d5rl.agents.encoders import is_pixel_obs
+from d5rl.agents.networks import soft_update
 
 
 class RLPDAgent(Agent):
@@ -102,6 +104,32 @@ class RLPDAgent(Agent):
         agent, actor_info = agent._update_actor_and_temperature(last)
         return agent, {**critic_info, **actor_info}
 
+    # --- how the loop feeds RLPD: utd_ratio minibatches per update, each half offline, half online ----
+    def samples_per_update(self) -> int:
+        return int(self.config.batch_size) * int(self.config.utd_ratio)
+
+    def online_split(self, offline_ratio: float) -> tuple[int, int]:
+        n_off = int(self.config.utd_ratio) * int(round(int(self.config.batch_size) * offline_ratio))
+        return n_off, self.samples_per_update() - n_off
+
+    def mix_online(self, offline: dict, online: dict) -> dict:
+        """Concatenated so that each of the ``utd_ratio`` consecutive minibatches holds its share of both."""
+        utd = int(self.config.utd_ratio)
+
+        def join(x, y):
+            z = np.concatenate([x.reshape((utd, -1) + x.shape[1:]), y.reshape((utd, -1) + y.shape[1:])], axis=1)
+            return z.reshape((-1,) + z.shape[2:])
+
+        return jax.tree_util.tree_map(join, offline, online)
+
+    @property
+    def default_offline_ratio(self) -> float:
+        return float(self.config.offline_ratio)
+
+    @property
+    def default_start_steps(self) -> int:
+        return int(self.config.start_steps)
+
     # --- construction ------------------------------------------------------------------------------
     @classmethod
     def create(cls, seed: int, example_observations, example_actions, config: Config | None = None):
@@ -110,15 +138,8 @@ class RLPDAgent(Agent):
         action_dim = ex_act.shape[-1]
         if config.target_entropy is None:
             config = config.replace(target_entropy=-action_dim / 2)
-        rng = jax.random.PRNGKey(seed)
-        rng, k_actor, k_critic, k_temp = jax.random.split(rng, 4)
-        actor_def = GaussianPolicy(make_encoder(config), config.hidden_dims, action_dim, tanh_squash=True,
-                                   log_std_min=config.log_std_min, log_std_max=config.log_std_max)
-        critic_def = Critic(make_encoder(config), config.hidden_dims, config.num_qs, config.critic_layer_norm,
-                            config.critic_dropout)
-        actor = make_train_state(actor_def, k_actor, (ex_obs,), config.actor_lr)
-        critic = make_train_state(critic_def, k_critic, (ex_obs, ex_act), config.critic_lr)
-        temp = make_train_state(Temperature(config.init_temperature), k_temp, (), config.temp_lr)
+        rng, *keys = jax.random.split(jax.random.PRNGKey(seed), 4)
+        actor, critic, temp = sac_train_states(config, keys, ex_obs, ex_act, config.critic_dropout)
         return cls(rng=rng, actor=actor, critic=critic, target_critic_params=copy_tree(critic.params), temp=temp,
                    config=config, obs_ndim=obs_ndims(ex_obs))
 

@@ -14,11 +14,13 @@ from typing import Any
 
 import jax
 import jax.numpy as jnp
+import numpy as np
 
 from d5rl.agents.augment import augment_batch
 from d5rl.agents.common import copy_tree, ENCODER_DEFAULTS, Agent, make_train_state, nonpytree_field, obs_ndims, prepare_example
 from d5rl.agents.config import Config
-from d5rl.agents.networks import Critic, DeterministicPolicy, is_pixel_obs, make_encoder, soft_update
+from d5rl.agents.networks import Critic, DeterministicPolicy, soft_update
+from d5rl.agents.encoders import is_pixel_obs, make_encoder
 
 
 ACTOR_METRICS = ("actor/loss", "actor/bc_mse", "actor/q", "actor/lambda")
@@ -27,6 +29,12 @@ ACTOR_METRICS = ("actor/loss", "actor/bc_mse", "actor/q", "actor/lambda")
 def no_actor_metrics():
     """The actor metrics of an update without an actor step."""
     return {k: jnp.zeros((), jnp.float32) for k in ACTOR_METRICS}
+
+
+def observation_stats(observations, eps: float = 1e-3) -> tuple[tuple[float, ...], tuple[float, ...]]:
+    """Per-dimension mean and std + ``eps`` of state observations (TD3+BC's normalization)."""
+    obs = np.asarray(observations, dtype=np.float64)
+    return tuple(float(x) for x in obs.mean(0)), tuple(float(x) for x in obs.std(0) + eps)
 
 
 class TD3BCAgent(Agent):
@@ -64,10 +72,21 @@ class TD3BCAgent(Agent):
         return self.replace(actor=actor, target_actor_params=soft_update(self.target_actor_params, actor.params, tau),
                             target_critic_params=soft_update(self.target_critic_params, self.critic.params, tau)), info
 
+    @classmethod
+    def fit_config(cls, config: Config, dataset) -> Config:
+        """Observation statistics of a state dataset, when ``normalize_observations`` (TD3+BC)."""
+        if not config.normalize_observations or config.obs_mean is not None:
+            return config
+        obs = dataset.observations
+        if isinstance(obs, dict):  # pixels: no normalization
+            return config
+        mean, std = observation_stats(obs)
+        return config.replace(obs_mean=mean, obs_std=std)
+
     def normalize(self, obs):
         """State observations standardised with the dataset's mean and std (TD3+BC); identity for
         pixel observations and when no statistics are configured."""
-        if self.config.get("obs_mean") is None or isinstance(obs, dict):  # absent in older runs
+        if self.config.obs_mean is None or isinstance(obs, dict):
             return obs
         return (obs - jnp.asarray(self.config.obs_mean, jnp.float32)) / jnp.asarray(self.config.obs_std, jnp.float32)
 

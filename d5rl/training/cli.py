@@ -15,7 +15,7 @@ def add_train_parser(subparsers) -> argparse.ArgumentParser:
                     "--run-dir. Config keys (agent and loop) are set with --set key=value; "
                     "see `d5rl train ALGO TASK --show-config`.")
     p.add_argument("algo", choices=sorted(AGENTS), help="agent")
-    p.add_argument("task", help="task id (or toy-reach-v0 / toy-reach-pixels-v0)")
+    p.add_argument("task", help="task id (`d5rl list`)")
     p.add_argument("--offline-steps", type=int, default=None, help="gradient updates on the dataset "
                    "(default 500000; none for RLPD when fine-tuning online)")
     p.add_argument("--online-steps", type=int, default=0, help="environment steps of online fine-tuning")
@@ -33,7 +33,8 @@ def cmd_train(args) -> int:
     import sys
 
     from d5rl.settings import resolve, run_steps
-    from d5rl.training.loop import check_run, train
+    from d5rl.training.config import check_run
+    from d5rl.training.loop import train
 
     offline, online = run_steps(args.algo, args.offline_steps, args.online_steps)
     if args.offline_steps and offline != args.offline_steps:

@@ -10,7 +10,9 @@ import pytest
 from d5rl.agents import UnknownAgentError, get_agent
 from d5rl.agents.augment import augment_observations, color_jitter, random_shift
 from d5rl.agents.config import Config, ConfigError
-from d5rl.agents.networks import Critic, Gaussian, ObsEncoder, cosine_beta_schedule
+from d5rl.agents.networks import Critic, Gaussian
+from d5rl.agents.encoders import ObsEncoder
+from d5rl.agents.diffusion import cosine_beta_schedule
 
 
 def test_config_override_parses_by_default_type():

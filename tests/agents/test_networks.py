@@ -6,7 +6,7 @@ import jax.numpy as jnp
 import numpy as np
 import pytest
 
-from d5rl.agents.networks import max_pool_3x3_s2
+from d5rl.agents.encoders import max_pool_3x3_s2
 
 
 def reference_pool(x):

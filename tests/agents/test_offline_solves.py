@@ -9,7 +9,7 @@ import numpy as np
 import pytest
 
 from d5rl.training.evaluation import evaluate
-from d5rl.training.toy import toy_dataset
+from d5rl.envs.toy.data import toy_dataset
 from tests.agents.helpers import make_agent, train
 
 OVERRIDES = {

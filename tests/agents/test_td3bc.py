@@ -1,7 +1,7 @@
 import numpy as np
 
-from d5rl.training.loop import observation_stats
-from d5rl.training.toy import toy_dataset
+from d5rl.agents.td3bc import observation_stats
+from d5rl.envs.toy.data import toy_dataset
 from tests.agents.helpers import dataset, make_agent, train
 
 
@@ -20,7 +20,7 @@ def test_td3bc_state_normalization_makes_training_shift_invariant():
     def policy(shift: float, normalize: bool):
         ds = toy_dataset(50)
         ds.arrays["observations"] = ds.arrays["observations"] + np.float32(shift)
-        mean, std = observation_stats(ds) if normalize else (None, None)
+        mean, std = observation_stats(ds.observations) if normalize else (None, None)
         agent, _ = train(make_agent("td3bc", ds, obs_mean=mean, obs_std=std), ds, chunks=1, chunk=60)
         probe = toy_dataset(2, seed=9).observations[:16] + np.float32(shift)
         return np.asarray(agent.eval_actions(probe))

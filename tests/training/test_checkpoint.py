@@ -13,7 +13,8 @@ import pytest
 from d5rl.training.checkpoint import (Checkpoint, CheckpointError, load_checkpoint, read_checkpoint,
                                       save_checkpoint)
 from d5rl.training.loop import load_run, train
-from d5rl.training.toy import toy_dataset
+from d5rl.envs.toy.data import toy_dataset
+from tests.training.helpers import interrupt_after_checkpoint
 
 SMALL = ["hidden_dims=32,32", "batch_size=32", "eval_episodes=2", "eval_envs=2", "log_interval=16",
          "progress=false", "tensorboard=false", "eval_interval=1000", "updates_per_call=8"]
@@ -125,8 +126,8 @@ def test_damaged_latest_checkpoint_resumes_from_previous_and_matches(tmp_path, c
     ds = toy_dataset(20)
     kw = SMALL + ["checkpoint_interval=16"]
     full = train("td3bc", "toy-reach-v0", 64, 0, 1, kw, tmp_path / "a", dataset=ds)
-    with pytest.raises(KeyboardInterrupt):
-        train("td3bc", "toy-reach-v0", 64, 0, 1, kw, tmp_path / "b", dataset=ds, _stop_at=48)
+    with pytest.raises(KeyboardInterrupt), interrupt_after_checkpoint(48):
+        train("td3bc", "toy-reach-v0", 64, 0, 1, kw, tmp_path / "b", dataset=ds)
     assert json.loads((tmp_path / "b" / "checkpoint" / "state.json").read_text())["step"] == 48
     _flip_byte(tmp_path / "b" / "checkpoint" / "agent.msgpack")
     capsys.readouterr()

@@ -8,7 +8,7 @@ import pytest
 
 from d5rl.agents.config import ConfigError
 from d5rl.training.loop import NonFiniteLossError, load_run, train
-from d5rl.training.toy import toy_dataset
+from d5rl.envs.toy.data import toy_dataset
 
 SMALL = {"hidden_dims": "32,32", "batch_size": "32", "eval_episodes": "2", "eval_envs": "2",
          "log_interval": "16", "progress": "false", "tensorboard": "false"}

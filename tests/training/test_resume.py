@@ -7,7 +7,8 @@ import numpy as np
 import pytest
 
 from d5rl.training.loop import train
-from d5rl.training.toy import toy_dataset
+from tests.training.helpers import interrupt_after_checkpoint
+from d5rl.envs.toy.data import toy_dataset
 
 SMALL = {"hidden_dims": "32,32", "batch_size": "32", "eval_episodes": "2", "eval_envs": "2",
          "log_interval": "16", "progress": "false", "tensorboard": "false"}
@@ -33,8 +34,8 @@ def test_offline_resume_is_exact(tmp_path):
     ds = toy_dataset(20)
     kw = overrides(checkpoint_interval=32, eval_interval=1000, updates_per_call=8)
     full = train("td3bc", "toy-reach-v0", 96, 0, 1, kw, tmp_path / "a", dataset=ds)
-    with pytest.raises(KeyboardInterrupt):
-        train("td3bc", "toy-reach-v0", 96, 0, 1, kw, tmp_path / "b", dataset=ds, _stop_at=56)
+    with pytest.raises(KeyboardInterrupt), interrupt_after_checkpoint(56):
+        train("td3bc", "toy-reach-v0", 96, 0, 1, kw, tmp_path / "b", dataset=ds)
     resumed = train("td3bc", "toy-reach-v0", 96, 0, 1, kw, tmp_path / "b", dataset=ds)
     for a, b in zip(leaves(full["agent"]), leaves(resumed["agent"])):
         np.testing.assert_array_equal(a, b)
@@ -45,8 +46,8 @@ def test_online_resume_is_exact_for_rlpd(tmp_path):
     ds = toy_dataset(10)
     kw = overrides(utd_ratio=2, batch_size=16, start_steps=10, checkpoint_interval=20, eval_interval=1000)
     full = train("rlpd", "toy-reach-v0", 0, 75, 2, kw, tmp_path / "a", dataset=ds)
-    with pytest.raises(KeyboardInterrupt):
-        train("rlpd", "toy-reach-v0", 0, 75, 2, kw, tmp_path / "b", dataset=ds, _stop_at=40)
+    with pytest.raises(KeyboardInterrupt), interrupt_after_checkpoint(20):
+        train("rlpd", "toy-reach-v0", 0, 75, 2, kw, tmp_path / "b", dataset=ds)
     state_step = json.loads((tmp_path / "b" / "checkpoint" / "state.json").read_text())["step"]
     assert state_step == 25  # the checkpoint due at step 20 waits for the episode end
     resumed = train("rlpd", "toy-reach-v0", 0, 75, 2, kw, tmp_path / "b", dataset=ds)

@@ -1,0 +1,131 @@
+"""The parts :func:`d5rl.training.loop.train` is composed of: the run's changing state (checkpointed
+as one object), the offline batch sampler, the metric accumulator and the evaluator."""
+
+from __future__ import annotations
+
+import dataclasses
+import math
+import time
+from pathlib import Path
+from typing import Any
+
+import jax
+import numpy as np
+
+from d5rl.errors import D5RLError
+from d5rl.training.evaluation import evaluate
+from d5rl.training.logger import Logger
+from d5rl.training.replay import ReplayBuffer
+
+BATCH_KEYS = ("observations", "actions", "rewards", "masks", "next_observations")
+FLOAT_KEYS = ("rewards", "masks", "mc_returns")
+
+
+class NonFiniteLossError(D5RLError, FloatingPointError):
+    """A loss or metric became NaN or infinite."""
+
+
+@dataclasses.dataclass
+class RunState:
+    """What changes during a run besides the agent; with it, one checkpoint resumes a run exactly."""
+
+    rng: np.random.Generator  # the loop's sampler of batches and random actions
+    step: int = 0  # offline updates + online environment steps done
+    online_done: int = 0  # online environment steps done
+    episode: int = 0  # online episodes finished
+    online_started: bool = False  # an online phase began (an agent without offline pretraining was re-made)
+    metric_sums: dict = dataclasses.field(default_factory=dict)  # metrics since the last log row, times updates
+    metric_count: int = 0  # updates in metric_sums
+    buffer: ReplayBuffer | None = None  # the online replay buffer
+
+    def to_json(self) -> dict:
+        return {"rng": self.rng.bit_generator.state, "step": self.step, "online_done": self.online_done,
+                "episode": self.episode, "online_started": self.online_started,
+                "metric_sums": dict(self.metric_sums), "metric_count": self.metric_count}
+
+    @classmethod
+    def from_json(cls, d: dict, buffer: ReplayBuffer | None = None) -> "RunState":
+        rng = np.random.default_rng()
+        rng.bit_generator.state = d["rng"]
+        return cls(rng, d["step"], d["online_done"], d["episode"], d["online_started"], dict(d["metric_sums"]),
+                   int(d["metric_count"]), buffer)
+
+
+class Sampler:
+    """Offline batches as the agent wants them: stacked frames, float32 scalars, and the agent's extra
+    keys (``mc_returns``: Monte-Carlo returns with the agent's discount)."""
+
+    def __init__(self, dataset, frame_stack: int, extra_keys: tuple[str, ...], discount: float):
+        self.dataset, self.frame_stack = dataset, int(frame_stack)
+        self.keys = BATCH_KEYS + tuple(extra_keys)
+        self.mc_gamma = float(discount) if "mc_returns" in self.keys else None
+
+    def sample(self, n: int, rng: np.random.Generator) -> dict:
+        b = self.dataset.sample(n, rng, frame_stack=self.frame_stack,
+                                **({"mc_gamma": self.mc_gamma} if self.mc_gamma is not None else {}))
+        return as_batch(b, self.keys)
+
+    def sample_stacked(self, k: int, n: int, rng: np.random.Generator) -> dict:
+        """``k`` batches of ``n`` on a leading axis (for ``update_many``)."""
+        batch = self.sample(k * n, rng)
+        return jax.tree_util.tree_map(lambda x: x.reshape((k, n) + x.shape[1:]), batch)
+
+
+def as_batch(b: dict, keys) -> dict:
+    return {k: b[k] if isinstance(b[k], dict) else np.asarray(b[k], np.float32 if k in FLOAT_KEYS else None)
+            for k in keys}
+
+
+class Metrics:
+    """Averages the agent's metrics between log rows (the sums live in the run state, so a resumed
+    run logs the same rows) and adds ``time/updates_per_s``; stops the run on a NaN or infinity."""
+
+    def __init__(self, state: RunState, logger: Logger, interval: int, bar):
+        self.state, self.logger, self.interval, self.bar = state, logger, int(interval), bar
+        self.t0, self.n = time.perf_counter(), 0
+
+    def record(self, metrics, n_updates: int) -> None:
+        host = {k: float(v) for k, v in jax.device_get(metrics).items()}
+        bad = [k for k, v in host.items() if not math.isfinite(v)]
+        if bad:
+            raise NonFiniteLossError(
+                f"non-finite values at step {self.state.step}: {', '.join(f'{k}={host[k]}' for k in bad)}",
+                "lower the learning rates (--set actor_lr=... critic_lr=...) or check the dataset for NaN rewards; "
+                "the run can resume from its last checkpoint",
+            )
+        sums = self.state.metric_sums
+        for k, v in host.items():
+            sums[k] = sums.get(k, 0.0) + v * n_updates
+        self.state.metric_count += n_updates
+        self.n += n_updates
+
+    def maybe_log(self, prev_step: int) -> None:
+        s = self.state
+        if crossed(prev_step, s.step, self.interval) and s.metric_count:
+            row = {k: v / s.metric_count for k, v in s.metric_sums.items()}
+            row["time/updates_per_s"] = self.n / max(time.perf_counter() - self.t0, 1e-9)
+            self.logger.log(s.step, row)
+            self.bar.set_postfix(ups=f"{row['time/updates_per_s']:.1f}", refresh=False)
+            s.metric_sums, s.metric_count = {}, 0
+            self.t0, self.n = time.perf_counter(), 0
+
+
+class Evaluator:
+    """Evaluates the agent on the task and logs ``eval/<task>/{return, return_std, length, success, score}``."""
+
+    def __init__(self, task_id: str, seed: int, frame_stack: int, cfg, logger: Logger, run_dir: Path):
+        self.task_id, self.seed, self.frame_stack, self.cfg = task_id, seed, frame_stack, cfg
+        self.logger, self.run_dir = logger, run_dir
+
+    def __call__(self, agent, step: int, episodes: int) -> dict[str, Any]:
+        video = self.run_dir / "videos" / f"step{step:09d}.mp4" if self.cfg.save_video else None
+        res = evaluate(agent, self.task_id, episodes, seed=10_000 * (self.seed + 1), num_envs=self.cfg.eval_envs,
+                       frame_stack=self.frame_stack, processes=self.cfg.eval_processes, video_path=video)
+        self.logger.log(step, {f"eval/{self.task_id}/{k}": res[k]
+                               for k in ("return", "return_std", "length", "success", "score") if k in res})
+        return res
+
+
+def crossed(prev: int, now: int, interval: int) -> bool:
+    """Whether a multiple of ``interval`` lies in ``(prev, now]``."""
+    return interval > 0 and now // interval > prev // interval
