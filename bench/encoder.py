@@ -90,7 +90,7 @@ def jax_encoder(batch, rng):
     import jax
     import jax.numpy as jnp
 
-    from d5rl.agents.networks import ImpalaEncoder
+    from d5rl.agents.encoders import ImpalaEncoder
 
     x = jnp.asarray(rng.random((batch, PIX, PIX, 3 * STACK * CAMS), dtype=np.float32))
     enc = ImpalaEncoder()
@@ -147,7 +147,7 @@ def main(argv=None) -> int:
     print(f"{'conv':22s} {'n':>2s} {'pass':4s} {'jax':>8s} {'torch':>8s} {'ratio':>6s}")
     total_j = total_t = 0.0
     first = True
-    from d5rl.agents.networks import ImpalaEncoder
+    from d5rl.agents.encoders import ImpalaEncoder
 
     for size, cin, cout, n in conv_shapes(ImpalaEncoder.channels, 3 * STACK * CAMS, PIX):
         jl, tl = jax_layer(args.batch, size, cin, cout, rng), torch_layer(args.batch, size, cin, cout, rng)

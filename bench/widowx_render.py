@@ -23,6 +23,7 @@ import d5rl  # noqa: E402,F401  (sets MUJOCO_GL)
 import mujoco  # noqa: E402
 import numpy as np  # noqa: E402
 
+from d5rl.envs.widowx import domain as wdom  # noqa: E402
 from d5rl.envs.widowx import model as wm  # noqa: E402
 from d5rl.envs.widowx.data import render_states  # noqa: E402
 from d5rl.envs.widowx.task import WidowXSortingEnv  # noqa: E402
@@ -61,7 +62,7 @@ def main() -> None:
 
     results = {}
     for name, model in (("stock", stock_model()), ("d5rl", wm.load_model())):
-        wm.apply_domain(model, domain)
+        wdom.apply_domain(model, domain)
         data = mujoco.MjData(model)
         mujoco.mj_setState(model, data, state, mujoco.mjtState.mjSTATE_INTEGRATION)
         mujoco.mj_forward(model, data)

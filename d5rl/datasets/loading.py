@@ -97,10 +97,6 @@ class ChunkedArray:
         return out.reshape(idx.shape + self.shape[1:])
 
 
-def _materialize(a) -> np.ndarray:
-    return np.asarray(a)
-
-
 class Dataset:
     """An offline dataset: flat arrays plus episode structure.
 

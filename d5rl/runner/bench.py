@@ -101,7 +101,7 @@ def prepare_datasets(cells: Iterable[Cell], workers: int | None = None, progress
         try:
             spec = get_spec(task)
         except (UnknownTaskError, D5RLError):
-            continue  # e.g. the trainer's numpy toy tasks: nothing to generate
+            continue  # a task only a custom job knows: nothing to generate
         if spec.dataset is None:
             continue
         try:

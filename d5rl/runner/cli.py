@@ -17,19 +17,13 @@ def resolve_tasks(names: list[str]) -> list[str]:
 
     from d5rl.registry import TASK_ID_RE, get_spec, list_tasks
 
-    try:  # the trainer's numpy toy tasks (toy-reach-v0, ...) are not in the registry
-        from d5rl.training.toy import TOY_TASKS
-    except ImportError:
-        TOY_TASKS = ()
     out: list[str] = []
     for name in names:
         for part in name.split(","):
             part = part.strip()
             if not part:
                 continue
-            if part in TOY_TASKS:
-                out.append(part)
-            elif any(c in part for c in "*?["):
+            if any(c in part for c in "*?["):
                 matches = fnmatch.filter(list_tasks(), part)
                 if not matches:
                     raise D5RLError(f"no registered task matches {part!r}", "run `d5rl list` to see the task ids")

@@ -23,7 +23,7 @@ import dataclasses
 import itertools
 import json
 from pathlib import Path
-from typing import Any, Iterable
+from typing import Iterable
 
 from d5rl.errors import D5RLError
 

@@ -7,7 +7,8 @@ import pytest
 import d5rl
 from d5rl.envs.base import ActionError, ResetNeededError
 
-TASKS = [t for t in d5rl.list_tasks() if not t.startswith("test-")]
+# every registered task but the numpy toy ones (no simulator; for tests and smoke runs)
+TASKS = [t for t in d5rl.list_tasks() if not t.startswith("test-") and d5rl.get_spec(t).benchmark_group != "toy"]
 # one env per distinct entry point and kwargs (tasks that share both behave the same)
 DISTINCT = list({(d5rl.get_spec(t).entry_point, repr(d5rl.get_spec(t).env_kwargs)): t for t in TASKS}.values())
 

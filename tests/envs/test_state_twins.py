@@ -26,9 +26,9 @@ def test_state_twin_observes_the_stored_states(task, twin, dim, proprio):
     env = d5rl.make_env(twin).unwrapped
     env.reset(seed=0)
     if hasattr(env, "set_domain") and "domain" in ds.episode_meta[0]:
-        from d5rl.envs.widowx import model as wm
+        from d5rl.envs.widowx import domain as wdom
 
-        env.set_domain(wm.Domain.from_json(ds.episode_meta[0]["domain"]))
+        env.set_domain(wdom.Domain.from_json(ds.episode_meta[0]["domain"]))
     for i in (0, 7, ds.num_transitions):
         env.set_state(np.asarray(ds.arrays["states"][i]))
         np.testing.assert_array_equal(env._obs() if hasattr(env, "_obs") else env._get_obs(), obs[i])

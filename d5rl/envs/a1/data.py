@@ -15,7 +15,7 @@ import numpy as np
 
 from d5rl.datasets.episode import Episode
 from d5rl.envs.a1 import rewards
-from d5rl.envs.a1.buffers import agent_log, episode_table, num_episodes  # noqa: F401  (num_episodes: public)
+from d5rl.envs.a1.buffers import agent_log, episode_table
 from d5rl.envs.a1.experts import AGENTS, EPISODE_STEPS, POLICY_DIR
 from d5rl.envs.a1.policy import SnapshotPolicy
 from d5rl.errors import D5RLError

@@ -85,20 +85,8 @@ class KitchenStandardGenerator:
             states.append(env.get_state())
             proprio.append(env.data.qpos[:9].astype(np.float32))
             completed.append(env.completed())
-        t = len(actions)
-        completed_arr = np.asarray(completed, dtype=bool).reshape(t, len(SUBTASK_NAMES))
-        timeouts = np.zeros(t, dtype=bool)
-        timeouts[-1] = True  # the demonstration ends here; no terminal state in the MDP
-        solved = completed_arr[:, cols].any(axis=0)
-        arrays = {
-            "observations/proprio": np.asarray(proprio, dtype=np.float32),
-            "actions": np.asarray(actions, dtype=np.float32).reshape(t, 9),
-            "rewards": completed_arr[:, cols].sum(axis=1).astype(np.float32),
-            "terminals": np.zeros(t, dtype=bool),
-            "timeouts": timeouts,
-            "states": np.asarray(states, dtype=np.float64),
-            "infos/completed": completed_arr,
-        }
+        arrays = episode_arrays(states, proprio, actions, completed, cols)
+        solved = arrays["infos/completed"][:, cols].any(axis=0)
         info = {
             "subtasks": list(subtasks),
             "solved": [s for s, ok in zip(subtasks, solved) if ok],
@@ -106,6 +94,25 @@ class KitchenStandardGenerator:
             "style": dict(vars(policy.style)) if hasattr(policy.style, "__dict__") else {},
         }
         return Episode(arrays, {**(meta or {}), **info})
+
+
+def episode_arrays(states, proprio, actions, completed, cols) -> dict[str, np.ndarray]:
+    """The stored arrays of one scripted kitchen episode (standard or randomized): T+1 states and
+    proprioception, T actions, rewards = how many of the target subtasks (``cols``) are done after each
+    step, ``infos/completed`` for every subtask; the episode ends in a timeout, never a terminal."""
+    t = len(actions)
+    completed = np.asarray(completed, dtype=bool).reshape(t, len(SUBTASK_NAMES))
+    timeouts = np.zeros(t, dtype=bool)
+    timeouts[-1] = True  # the demonstration ends here; no terminal state in the MDP
+    return {
+        "observations/proprio": np.asarray(proprio, dtype=np.float32),
+        "actions": np.asarray(actions, dtype=np.float32).reshape(t, 9),
+        "rewards": completed[:, cols].sum(axis=1).astype(np.float32),
+        "terminals": np.zeros(t, dtype=bool),
+        "timeouts": timeouts,
+        "states": np.asarray(states, dtype=np.float64),
+        "infos/completed": completed,
+    }
 
 
 def relabel(spec, arrays) -> dict[str, np.ndarray]:

@@ -20,7 +20,6 @@ PAPER = {"episodes": 563, "transitions": 128_569, "mean_return": 261.12, "object
 
 
 def dataset_stats(episodes: int | None = None, workers: int | None = None) -> dict:
-    import d5rl
     from d5rl.datasets.loading import load_dataset
     from d5rl.envs.kitchen.data import COMBINATIONS
     from d5rl.envs.kitchen.subtasks import MIXED, PARTIAL, SUBTASK_NAMES

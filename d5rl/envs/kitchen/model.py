@@ -232,20 +232,3 @@ def build_model(options: SceneOptions = SceneOptions()) -> mujoco.MjModel:
 def stock_model() -> mujoco.MjModel:
     """The scene exactly as the asset package ships it (for render benchmarks), plus our cameras."""
     return build_model(SceneOptions(fast_render=False, decimate_cell=None))
-
-
-# --- named state accessors -----------------------------------------------------------------------
-def joint_qpos_index(model: mujoco.MjModel, joint: str) -> int:
-    return int(model.jnt_qposadr[model.joint(joint).id])
-
-
-def robot_qpos(data: mujoco.MjData) -> np.ndarray:
-    return data.qpos[:NUM_ROBOT_QPOS].copy()
-
-
-def object_qpos(data: mujoco.MjData) -> np.ndarray:
-    return data.qpos[NUM_ROBOT_QPOS : NUM_ROBOT_QPOS + NUM_OBJECT_QPOS].copy()
-
-
-def site_pos(model: mujoco.MjModel, data: mujoco.MjData, site: str) -> np.ndarray:
-    return data.site_xpos[model.site(site).id].copy()

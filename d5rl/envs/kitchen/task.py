@@ -21,7 +21,7 @@ Observation space
     ``obs_mode="state"``: float32 ``(30,)``, the 9 robot joint positions then the 21 object
     joint positions (4 knobs, 4 burners, switch, light, slide door, 2 hinge doors,
     microwave door, kettle position and quaternion).
-    Wrap with :class:`d5rl.envs.kitchen.wrappers.FrameStack` for the paper's 3 stacked frames.
+    Wrap with :class:`d5rl.envs.wrappers.FrameStack` for the paper's 3 stacked frames.
 
 Reward
     Each step: the number of target objects currently in their goal configuration (joint

@@ -31,6 +31,7 @@ import numpy as np
 
 from d5rl.datasets.episode import Episode
 from d5rl.envs.widowx import model as wm
+from d5rl.envs.widowx import domain as wdom
 from d5rl.envs.widowx import scripted
 from d5rl.envs.widowx.registration import MAX_EPISODE_STEPS
 from d5rl.envs.widowx.task import WidowXSortingEnv
@@ -138,7 +139,7 @@ def render_states(states: np.ndarray, meta: dict, size: int = 128, camera: str =
     from d5rl.envs.base import STATE_SPEC
 
     model, data, renderer = _render_context(int(size))
-    wm.apply_domain(model, wm.Domain.from_json(meta["domain"]))
+    wdom.apply_domain(model, wdom.Domain.from_json(meta["domain"]))
     out = np.empty((len(states), size, size, 3), np.uint8)
     for i, s in enumerate(np.asarray(states, np.float64)):
         mujoco.mj_setState(model, data, s, STATE_SPEC)
@@ -161,7 +162,7 @@ def state_episode(arrays: dict[str, np.ndarray], meta: dict) -> dict[str, np.nda
     if "env" not in _STATE_ENV:
         _STATE_ENV["env"] = WidowXSortingEnv(obs_mode="state")
     env = _STATE_ENV["env"]
-    env.set_domain(wm.Domain.from_json(meta["domain"]))
+    env.set_domain(wdom.Domain.from_json(meta["domain"]))
     out = []
     for s in np.asarray(arrays["states"], np.float64):
         env.set_state(s)

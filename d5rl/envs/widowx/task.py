@@ -55,6 +55,8 @@ import numpy as np
 from d5rl.envs.base import MujocoEnv
 from d5rl.envs.widowx import controller
 from d5rl.envs.widowx import model as wm
+from d5rl.envs.widowx import domain as wdom
+from d5rl.envs.widowx import scene as wscene
 
 FRAME_SKIP = 50  # 10 Hz control with 2 ms physics steps
 HOME_POSE = np.array([0.22, 0.0, 0.18, math.pi / 2])
@@ -62,13 +64,13 @@ SETTLE_STEPS = 150  # 0.3 s of physics after placing the objects
 MIN_OBJECT_DISTANCE = 0.09
 
 
-def sorted_count(model: mujoco.MjModel, data: mujoco.MjData, domain: wm.Domain) -> tuple[int, dict[str, str | None]]:
+def sorted_count(model: mujoco.MjModel, data: mujoco.MjData, domain: wdom.Domain) -> tuple[int, dict[str, str | None]]:
     """How many of the episode's objects lie in their category's bin, and where each lies."""
     where: dict[str, str | None] = {}
     count = 0
     for name in domain.objects:
         pos = data.xipos[model.body(name).id]
-        where[name] = next((b for b in wm.BIN_CENTERS if wm.in_bin(pos, b)), None)
+        where[name] = next((b for b in wm.BIN_CENTERS if wscene.in_bin(pos, b)), None)
         count += int(where[name] == wm.CATEGORY[name])
     return count, where
 
@@ -97,9 +99,9 @@ class WidowXSortingEnv(MujocoEnv):
         self.randomize = bool(randomize)
         self.max_delta = float(max_delta)
         self.max_yaw_delta = float(max_yaw_delta)
-        self.index = wm.SceneIndex(model)
-        self.domain: wm.Domain = wm.sample_domain(np.random.default_rng(0), randomize=False)
-        wm.apply_domain(self.model, self.domain)
+        self.index = wscene.SceneIndex(model)
+        self.domain: wdom.Domain = wdom.sample_domain(np.random.default_rng(0), randomize=False)
+        wdom.apply_domain(self.model, self.domain)
         self.action_space = gym.spaces.Box(-1.0, 1.0, (5,), np.float32)
         proprio = gym.spaces.Box(-np.inf, np.inf, (8,), np.float32)
         if obs_mode == "pixels":
@@ -161,9 +163,9 @@ class WidowXSortingEnv(MujocoEnv):
         rng = self.np_random
         domain = options.get("domain")
         if domain is None:
-            domain = wm.sample_domain(rng, randomize=self.randomize)
+            domain = wdom.sample_domain(rng, randomize=self.randomize)
         elif isinstance(domain, dict):
-            domain = wm.Domain.from_json(domain)
+            domain = wdom.Domain.from_json(domain)
         self.set_domain(domain)
         mujoco.mj_resetData(self.model, self.data)
         for i, name in enumerate(wm.POOL):
@@ -178,7 +180,7 @@ class WidowXSortingEnv(MujocoEnv):
             placed.append(xy)
             yaw = rng.uniform(-math.pi, math.pi)
             z = 0.005 - self.index.obj_local_bottom[name]
-            self.index.set_object_pose(self.data, name, [xy[0], xy[1], z], wm.yaw_quat(yaw))
+            self.index.set_object_pose(self.data, name, [xy[0], xy[1], z], wscene.yaw_quat(yaw))
         home = HOME_POSE.copy()
         home[:3] += rng.uniform(-0.015, 0.015, 3)
         q = controller.ik(home)
@@ -189,10 +191,10 @@ class WidowXSortingEnv(MujocoEnv):
         count, where = sorted_count(self.model, self.data, self.domain)
         return self._obs(), self._info(count, where)
 
-    def set_domain(self, domain: wm.Domain) -> None:
+    def set_domain(self, domain: wdom.Domain) -> None:
         """Apply an episode's objects and looks (textures, lights, camera) to the model."""
         self.domain = domain
-        wm.apply_domain(self.model, domain)
+        wdom.apply_domain(self.model, domain)
 
     # --- observations ------------------------------------------------------------
     def proprio(self) -> np.ndarray:

@@ -15,7 +15,7 @@ import d5rl
 from d5rl.envs.kitchen import model as km
 from d5rl.envs.kitchen.subtasks import MIXED, PARTIAL, SUBTASK_NAMES, SUBTASKS, CompletionChecker
 from d5rl.envs.kitchen.task import KitchenEnv
-from d5rl.envs.kitchen.wrappers import FrameStack
+from d5rl.envs.wrappers import FrameStack
 from d5rl.errors import D5RLError
 
 ROOT = Path(__file__).resolve().parents[3]
@@ -142,7 +142,7 @@ def test_zero_action_holds_the_arm_still(state_env):
 
 
 def test_frame_stack():
-    env = FrameStack(KitchenEnv(), num_stack=3)
+    env = FrameStack(KitchenEnv(), 3)
     obs, _ = env.reset(seed=0)
     assert obs["pixels/overview"].shape == (64, 64, 9) and obs["proprio"].shape == (9,)
     np.testing.assert_array_equal(obs["pixels/overview"][..., :3], obs["pixels/overview"][..., 6:])

@@ -12,6 +12,8 @@ import pytest
 import d5rl
 from d5rl.envs.widowx import controller, scripted
 from d5rl.envs.widowx import model as wm
+from d5rl.envs.widowx import domain as wdom
+from d5rl.envs.widowx import scene as wscene
 from d5rl.envs.widowx.data import WidowXScriptedGenerator, render_states
 from d5rl.envs.widowx.task import WidowXSortingEnv
 from d5rl.errors import MissingAssetError
@@ -25,8 +27,8 @@ def env():
 
 
 def _domain(shoe="sneaker", toy="duck"):
-    d = wm.sample_domain(np.random.default_rng(0), randomize=False)
-    return wm.Domain.from_json({**d.to_json(), "shoe": shoe, "toy": toy})
+    d = wdom.sample_domain(np.random.default_rng(0), randomize=False)
+    return wdom.Domain.from_json({**d.to_json(), "shoe": shoe, "toy": toy})
 
 
 # --- robot ---------------------------------------------------------------------------
@@ -68,7 +70,7 @@ def test_gripper_travel_and_opening(env):
 def test_ik_matches_simulator():
     m = wm.load_model()
     d = mujoco.MjData(m)
-    idx = wm.SceneIndex(m)
+    idx = wscene.SceneIndex(m)
     rng = np.random.default_rng(0)
     for _ in range(20):
         pose = np.r_[rng.uniform(controller.WORKSPACE_LOW, controller.WORKSPACE_HIGH), rng.uniform(-1, 1)]
@@ -104,7 +106,7 @@ def test_grasp_and_lift_each_object(env, name):
         # hold it up for a second while moving: it must not slip through the fingers
         for _ in range(10):
             env.step(np.array([0, 0, 0.2, 0, 1.0], np.float32))
-        z = wm.object_center(env.model, env.data, name)[2]
+        z = wscene.object_center(env.model, env.data, name)[2]
         lifted += z > 0.1
     assert lifted == 2, f"{name} slipped"
 
@@ -113,16 +115,16 @@ def test_grasp_and_lift_each_object(env, name):
 def test_object_dropped_in_bin_counts(env, bin_name):
     env.reset(seed=0, options={"domain": _domain()})
     cx, cy = wm.BIN_CENTERS[bin_name]
-    env.index.set_object_pose(env.data, "sneaker", [cx + 0.035, cy, 0.12], wm.yaw_quat(math.pi / 2 + 0.2))
+    env.index.set_object_pose(env.data, "sneaker", [cx + 0.035, cy, 0.12], wscene.yaw_quat(math.pi / 2 + 0.2))
     for _ in range(10):
         _, r, _, _, info = env.step(np.zeros(5, np.float32))
-    pos = wm.object_center(env.model, env.data, "sneaker")
-    assert wm.in_bin(pos, bin_name) and pos[2] < wm.BIN_HEIGHT  # it stays inside
+    pos = wscene.object_center(env.model, env.data, "sneaker")
+    assert wscene.in_bin(pos, bin_name) and pos[2] < wm.BIN_HEIGHT  # it stays inside
     assert info["shoe_bin"] == bin_name and info["toy_bin"] is None
     assert r == (1.0 if bin_name == "shoe" else 0.0)
     # both sorted -> 2
     tx, ty = wm.BIN_CENTERS["toy"]
-    env.index.set_object_pose(env.data, "duck", [tx - 0.035, ty, 0.12], wm.yaw_quat(math.pi / 2))
+    env.index.set_object_pose(env.data, "duck", [tx - 0.035, ty, 0.12], wscene.yaw_quat(math.pi / 2))
     for _ in range(10):
         _, r, _, _, info = env.step(np.zeros(5, np.float32))
     assert r == (2.0 if bin_name == "shoe" else 1.0)
@@ -133,7 +135,7 @@ def test_object_on_table_does_not_count(env):
     env.reset(seed=0, options={"domain": _domain()})
     # right next to the shoe bin, on the table
     cx, cy = wm.BIN_CENTERS["shoe"]
-    env.index.set_object_pose(env.data, "sneaker", [cx - wm.BIN_INNER_HALF - 0.07, cy, 0.03], wm.yaw_quat(0.0))
+    env.index.set_object_pose(env.data, "sneaker", [cx - wm.BIN_INNER_HALF - 0.07, cy, 0.03], wscene.yaw_quat(0.0))
     for _ in range(5):
         _, r, _, _, info = env.step(np.zeros(5, np.float32))
     assert r == 0.0 and info["shoe_bin"] is None

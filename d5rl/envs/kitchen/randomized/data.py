@@ -24,6 +24,7 @@ from typing import Sequence
 import numpy as np
 
 from d5rl.datasets.episode import Episode
+from d5rl.envs.kitchen.data import episode_arrays
 from d5rl.envs.kitchen.subtasks import MIXED, PARTIAL, SUBTASK_NAMES
 
 MAX_STEPS = 500
@@ -107,20 +108,8 @@ class RandomizedKitchenGenerator:
             states.append(env.get_state())
             proprio.append(env.data.qpos[:9].astype(np.float32))
             completed.append(env.completed())
-        t = len(actions)
-        comp = np.asarray(completed, dtype=bool).reshape(t, len(SUBTASK_NAMES))
-        timeouts = np.zeros(t, dtype=bool)
-        timeouts[-1] = True
-        solved_any = comp.any(axis=0)
-        arrays = {
-            "observations/proprio": np.asarray(proprio, dtype=np.float32),
-            "actions": np.asarray(actions, dtype=np.float32).reshape(t, 9),
-            "rewards": comp[:, cols].sum(axis=1).astype(np.float32),
-            "terminals": np.zeros(t, dtype=bool),
-            "timeouts": timeouts,
-            "states": np.asarray(states, dtype=np.float64),
-            "infos/completed": comp,
-        }
+        arrays = episode_arrays(states, proprio, actions, completed, cols)
+        solved_any = arrays["infos/completed"].any(axis=0)
         meta = {
             "domain": info0["domain"],
             "operator": op.name,

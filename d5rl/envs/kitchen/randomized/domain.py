@@ -230,9 +230,3 @@ def apply_domain(model: mujoco.MjModel, domain: Domain) -> None:
         cid = model.camera(name).id
         model.cam_pos[cid] = pos
         model.cam_quat[cid] = _camera_quat(xyaxes)
-
-
-def domain_model(domain: Domain) -> mujoco.MjModel:
-    model = compiled_variant(domain.microwave, domain.kettle, domain.num_lights).__copy__()
-    apply_domain(model, domain)
-    return model

@@ -15,7 +15,7 @@ Action space
 Observation space
     Dict: ``pixels/left``, ``pixels/right`` (side cameras), ``pixels/wrist``, uint8 (S, S, 3) with
     S = 128 by default, and ``proprio`` (9 joint positions).  Stack 3 frames with
-    :class:`d5rl.envs.kitchen.wrappers.FrameStack`.
+    :class:`d5rl.envs.wrappers.FrameStack`.
 
 Reward
     As the standard kitchen (number of target subtasks in their goal configuration).
