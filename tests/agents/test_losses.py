@@ -1,0 +1,253 @@
+"""Every agent's losses against values computed independently in numpy, on a tiny fixed batch.
+
+"The loss falls" lets a sign or coefficient error through; these do not.  The networks' forward
+passes are recomputed in float64 numpy from the agents' own parameters; random draws inside a loss
+(policy samples, target noise, diffusion steps) are taken from the same keys, the way the agent
+splits them, and everything done with them is recomputed here.
+"""
+
+import math
+
+import jax
+import jax.numpy as jnp
+import numpy as np
+import pytest
+
+from d5rl.agents import get_agent
+from d5rl.agents.diffusion import cosine_beta_schedule
+
+B, OBS, ACT = 5, 3, 2
+RTOL = 2e-4
+
+
+def batch(seed=0):
+    rng = np.random.default_rng(seed)
+    return {"observations": rng.normal(size=(B, OBS)).astype(np.float32),
+            "next_observations": rng.normal(size=(B, OBS)).astype(np.float32),
+            "actions": rng.uniform(-0.9, 0.9, (B, ACT)).astype(np.float32),
+            "rewards": rng.normal(size=B).astype(np.float32),
+            "masks": np.array([1, 1, 0, 1, 1], np.float32),
+            "mc_returns": rng.normal(size=B).astype(np.float32)}
+
+
+def make(name, **kw):
+    cls, config_fn = get_agent(name)
+    cfg = config_fn()
+    sizes = {"hidden_dims": (8, 8)} if "hidden_dims" in cfg else {}
+    cfg = cfg.replace(**{**sizes, **kw})
+    ex = batch()
+    return cls.create(0, ex["observations"][:1], ex["actions"][:1], cfg)
+
+
+# --- numpy forward passes of the agents' networks ---------------------------------------------------------
+def P(tree):
+    return jax.tree_util.tree_map(lambda x: np.asarray(x, np.float64), tree)
+
+
+relu = lambda x: np.maximum(x, 0)  # noqa: E731
+
+
+def layer_norm(p, x, eps=1e-6):
+    mu, var = x.mean(-1, keepdims=True), x.var(-1, keepdims=True)
+    return (x - mu) / np.sqrt(var + eps) * p["scale"] + p["bias"]
+
+
+def mlp(p, x, n_layers, activate_final=False, ln=False):
+    for i in range(n_layers):
+        d = p[f"Dense_{i}"]
+        x = x @ d["kernel"] + d["bias"]
+        if i + 1 < n_layers or activate_final:
+            if ln:
+                x = layer_norm(p[f"LayerNorm_{i}"], x)
+            x = relu(x)
+    return x
+
+
+def critic(p, obs, act, ln=False):
+    """(num_qs, B): every head of the ensemble on concat(obs, act)."""
+    heads = P(p)["heads"]["VmapMLP_0"]
+    n = len([k for k in heads if k.startswith("Dense")])
+    x = np.concatenate([obs, act], -1).astype(np.float64)
+    out = []
+    for q in range(heads["Dense_0"]["kernel"].shape[0]):
+        out.append(mlp(jax.tree_util.tree_map(lambda a: a[q], heads), x, n, ln=ln)[..., 0])
+    return np.stack(out)
+
+
+def value(p, obs):
+    p = P(p)["MLP_0"]
+    return mlp(p, obs.astype(np.float64), len(p))[..., 0]
+
+
+def gaussian(p, obs, cfg, tanh_squash):
+    """(loc, log_std) of the GaussianPolicy."""
+    p = P(p)
+    h = mlp(p["MLP_0"], obs.astype(np.float64), len(p["MLP_0"]), activate_final=True)
+    loc = h @ p["Dense_0"]["kernel"] + p["Dense_0"]["bias"]
+    log_std = h @ p["Dense_1"]["kernel"] + p["Dense_1"]["bias"] if "Dense_1" in p else np.broadcast_to(p["log_std"], loc.shape)
+    log_std = np.clip(log_std, cfg.log_std_min, cfg.log_std_max)
+    return (loc if tanh_squash else np.tanh(loc)), log_std
+
+
+def normal_logp(loc, log_std, u):
+    return np.sum(-0.5 * ((u - loc) / np.exp(log_std)) ** 2 - log_std - 0.5 * math.log(2 * math.pi), -1)
+
+
+def tanh_sample(loc, log_std, eps):
+    """A tanh-squashed sample and its log-density (change of variables)."""
+    u = loc + np.exp(log_std) * eps
+    a = np.tanh(u)
+    return a, normal_logp(loc, log_std, u) - np.sum(np.log(1 - a**2), -1)
+
+
+def logsumexp(x, axis):
+    m = x.max(axis=axis, keepdims=True)
+    return (m + np.log(np.exp(x - m).sum(axis=axis, keepdims=True))).squeeze(axis)
+
+
+def close(got, want):
+    np.testing.assert_allclose(float(got), float(want), rtol=RTOL, atol=1e-5)
+
+
+# --- BC, IQL, IDQL ------------------------------------------------------------------------------------------
+def test_bc_loss_is_the_negative_log_likelihood():
+    agent, b = make("bc"), batch()
+    loss, info = agent.actor_loss(agent.actor.params, b, jax.random.PRNGKey(1))
+    loc, log_std = gaussian(agent.actor.params, b["observations"], agent.config, tanh_squash=False)
+    close(loss, -normal_logp(loc, log_std, b["actions"]).mean())
+    close(info["actor/mse"], ((loc - b["actions"]) ** 2).sum(-1).mean())
+
+
+@pytest.mark.parametrize("name", ["iql", "idql"])
+def test_iql_value_and_critic_losses(name):
+    kw = {"critic_hidden_dims": (8, 8), "hidden_dim": 8, "num_blocks": 1} if name == "idql" else {}
+    agent, b = make(name, expectile=0.8, discount=0.9, **kw), batch()
+    q = critic(agent.target_critic_params, b["observations"], b["actions"]).min(0)
+    v = value(agent.value.params, b["observations"])
+    diff = q - v
+    close(agent.value_loss(agent.value.params, b)[0], np.mean(np.where(diff > 0, 0.8, 0.2) * diff**2))
+    target = b["rewards"] + 0.9 * b["masks"] * value(agent.value.params, b["next_observations"])
+    qs = critic(agent.critic.params, b["observations"], b["actions"])
+    close(agent.critic_loss(agent.critic.params, b)[0], ((qs - target) ** 2).mean(1).sum())
+
+
+def test_iql_actor_loss_is_advantage_weighted_regression():
+    agent, b = make("iql", temperature=3.0, max_weight=2.0), batch()
+    loss, _ = agent.actor_loss(agent.actor.params, b, jax.random.PRNGKey(2))
+    adv = critic(agent.target_critic_params, b["observations"], b["actions"]).min(0) - value(agent.value.params,
+                                                                                            b["observations"])
+    w = np.minimum(np.exp(3.0 * adv), 2.0)
+    loc, log_std = gaussian(agent.actor.params, b["observations"], agent.config, tanh_squash=False)
+    close(loss, -(w * normal_logp(loc, log_std, b["actions"])).mean())
+
+
+# --- CQL and Cal-QL -----------------------------------------------------------------------------------------
+@pytest.mark.parametrize("name", ["cql", "calql"])
+def test_cql_critic_loss(name):
+    agent, b = make(name, cql_n_actions=3, cql_alpha=2.0, discount=0.9), batch()
+    key = jax.random.PRNGKey(3)
+    loss, info = agent.critic_loss(agent.critic.params, b, key)
+    cfg, n = agent.config, 3
+    k_next, k_rand, k_cur, k_nxt = jax.random.split(key, 4)
+    obs, nobs = b["observations"], b["next_observations"]
+    loc_s, ls_s = gaussian(agent.actor.params, obs, cfg, tanh_squash=True)
+    loc_n, ls_n = gaussian(agent.actor.params, nobs, cfg, tanh_squash=True)
+    # TD: r + γ·mask·min_i Q_target_i(s', a'), a' ~ π(s') (no entropy backup in CQL)
+    a_next, _ = tanh_sample(loc_n, ls_n, np.asarray(jax.random.normal(k_next, (B, ACT)), np.float64))
+    target = b["rewards"] + 0.9 * b["masks"] * critic(agent.target_critic_params, nobs, a_next).min(0)
+    qs = critic(agent.critic.params, obs, b["actions"])
+    td = ((qs - target) ** 2).mean(1).sum()
+    # conservative term: importance-sampled log-sum-exp over uniform, π(s) and π(s') actions
+    rand = np.asarray(jax.random.uniform(k_rand, (n, B, ACT), minval=-1.0, maxval=1.0), np.float64)
+    cur, cur_lp = tanh_sample(loc_s, ls_s, np.asarray(jax.random.normal(k_cur, (n, B, ACT)), np.float64))
+    nxt, nxt_lp = tanh_sample(loc_n, ls_n, np.asarray(jax.random.normal(k_nxt, (n, B, ACT)), np.float64))
+
+    def q_of(a):  # (num_qs, n, B)
+        return np.stack([critic(agent.critic.params, obs, a[i]) for i in range(n)], 1)
+
+    q_rand, q_cur, q_nxt = q_of(rand), q_of(cur), q_of(nxt)
+    if name == "calql":  # Cal-QL: policy-action values bounded below by the Monte-Carlo return
+        q_cur = np.maximum(q_cur, b["mc_returns"])
+        q_nxt = np.maximum(q_nxt, b["mc_returns"])
+    cat = np.concatenate([q_rand - ACT * math.log(0.5), q_nxt - nxt_lp[None], q_cur - cur_lp[None]], 1)
+    ood = logsumexp(cat, 1)
+    close(info["critic/td_loss"], td)
+    close(info["critic/cql_loss"], 2.0 * (ood - qs).mean(1).sum())
+    close(loss, td + 2.0 * (ood - qs).mean(1).sum())
+
+
+def test_sac_actor_and_temperature_losses_of_cql():
+    agent, b = make("cql"), batch()
+    key = jax.random.PRNGKey(4)
+    loss, info = agent.actor_loss(agent.actor.params, b, key)
+    loc, ls = gaussian(agent.actor.params, b["observations"], agent.config, tanh_squash=True)
+    a, logp = tanh_sample(loc, ls, np.asarray(jax.random.normal(key, (B, ACT)), np.float64))
+    alpha = float(agent.temp.apply_fn({"params": agent.temp.params}))
+    q = critic(agent.critic.params, b["observations"], a).min(0)
+    close(loss, (alpha * logp - q).mean())
+    t_loss, _ = agent.temperature_loss(agent.temp.params, 1.7)
+    close(t_loss, alpha * (1.7 - agent.config.target_entropy))
+
+
+# --- TD3+BC -------------------------------------------------------------------------------------------------
+def test_td3bc_losses():
+    agent, b = make("td3bc", alpha=2.5, discount=0.9, policy_noise=0.2, noise_clip=0.3), batch()
+    key = jax.random.PRNGKey(5)
+
+    def pi(params, obs):
+        p = P(params)
+        h = mlp(p["MLP_0"], obs.astype(np.float64), len(p["MLP_0"]), activate_final=True)
+        return np.tanh(h @ p["Dense_0"]["kernel"] + p["Dense_0"]["bias"])
+
+    noise = np.clip(0.2 * np.asarray(jax.random.normal(key, (B, ACT)), np.float64), -0.3, 0.3)
+    a_next = np.clip(pi(agent.target_actor_params, b["next_observations"]) + noise, -1, 1)
+    target = b["rewards"] + 0.9 * b["masks"] * critic(agent.target_critic_params, b["next_observations"], a_next).min(0)
+    qs = critic(agent.critic.params, b["observations"], b["actions"])
+    close(agent.critic_loss(agent.critic.params, b, key)[0], ((qs - target) ** 2).mean(1).sum())
+    a = pi(agent.actor.params, b["observations"])
+    q1 = critic(agent.critic.params, b["observations"], a)[0]
+    lam = 2.5 / np.abs(q1).mean()
+    close(agent.actor_loss(agent.actor.params, b)[0], -lam * q1.mean() + ((a - b["actions"]) ** 2).mean())
+
+
+# --- RLPD ---------------------------------------------------------------------------------------------------
+def test_rlpd_critic_loss_uses_a_random_subset_of_layernorm_critics():
+    agent, b = make("rlpd", num_qs=4, num_min_qs=2, discount=0.9, backup_entropy=True), batch()
+    key = jax.random.PRNGKey(6)
+    loss, _ = agent.critic_loss(agent.critic.params, b, key)
+    k_act, k_sub, _ = jax.random.split(key, 3)
+    loc, ls = gaussian(agent.actor.params, b["next_observations"], agent.config, tanh_squash=True)
+    a_next, logp = tanh_sample(loc, ls, np.asarray(jax.random.normal(k_act, (B, ACT)), np.float64))
+    subset = np.asarray(jax.random.choice(k_sub, 4, (2,), replace=False))
+    target_qs = critic(agent.target_critic_params, b["next_observations"], a_next, ln=True)
+    alpha = float(agent.temp.apply_fn({"params": agent.temp.params}))
+    target = b["rewards"] + 0.9 * b["masks"] * (target_qs[subset].min(0) - alpha * logp)
+    qs = critic(agent.critic.params, b["observations"], b["actions"], ln=True)
+    close(loss, ((qs - target) ** 2).mean())
+
+
+# --- diffusion (DDPM+BC, IDQL) ------------------------------------------------------------------------------
+def test_cosine_schedule_and_denoising_loss():
+    from d5rl.agents.ddpm_bc import diffusion_loss
+
+    T, s = 5, 0.008
+    x = np.arange(T + 1) / T  # Nichol & Dhariwal (2021): ᾱ(t) = f(t) / f(0), f(t) = cos²((t/T + s)/(1 + s) · π/2)
+    ac = np.cos((x + s) / (1 + s) * np.pi * 0.5) ** 2
+    ac = ac / ac[0]
+    betas = np.clip(1 - ac[1:] / ac[:-1], 0, 0.999)
+    np.testing.assert_allclose(np.asarray(cosine_beta_schedule(T)), betas, rtol=1e-5)
+
+    w = np.array([[0.5, -1.0], [2.0, 0.3]], np.float32)
+
+    def apply_fn(variables, obs, noisy, t, train, rngs):  # a stand-in noise model: linear in its inputs
+        return noisy @ variables["params"]["w"] + 0.1 * t + obs[:, :1]
+
+    b, key = batch(), jax.random.PRNGKey(7)
+    loss = diffusion_loss(apply_fn, {"w": jnp.asarray(w)}, b["observations"], b["actions"], key, T)
+    k_t, k_noise, _ = jax.random.split(key, 3)
+    t = np.asarray(jax.random.randint(k_t, (B,), 0, T))
+    noise = np.asarray(jax.random.normal(k_noise, (B, ACT)), np.float64)
+    alpha_hat = np.cumprod(1 - betas)[t][:, None]
+    noisy = np.sqrt(alpha_hat) * b["actions"] + np.sqrt(1 - alpha_hat) * noise
+    eps = noisy @ w + 0.1 * t[:, None] + b["observations"][:, :1]
+    close(loss, ((eps - noise) ** 2).sum(-1).mean())
