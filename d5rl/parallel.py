@@ -61,6 +61,28 @@ def check_workers(workers: Workers) -> None:
                         "omit --workers to use every core, or pass --workers 1 to run in this process")
 
 
+# Environment of a worker: one compute thread per process, so K workers use K cores.
+SINGLE_THREAD_ENV = {
+    "OMP_NUM_THREADS": "1",
+    "MKL_NUM_THREADS": "1",
+    "OPENBLAS_NUM_THREADS": "1",
+    "TF_CPP_MIN_LOG_LEVEL": "2",
+    "XLA_PYTHON_CLIENT_PREALLOCATE": "false",  # several jobs may share one GPU
+}
+
+
+def configure_worker(single_thread: bool = True, nice: int = 0) -> None:
+    """The per-process environment of every d5rl worker (dataset pool, bench cells), set before any
+    numerical library is imported: one compute thread (unless asked otherwise), optional niceness."""
+    if single_thread:
+        add_xla_flags(*SINGLE_THREAD)
+        for k, v in SINGLE_THREAD_ENV.items():
+            os.environ.setdefault(k, v)
+    if nice:
+        with contextlib.suppress(OSError):
+            os.nice(nice)
+
+
 def die_with_parent(parent_pid: int | None = None) -> None:
     """Make this process exit when its parent dies, however it dies (no orphans)."""
     parent_pid = os.getppid() if parent_pid is None else parent_pid
@@ -96,10 +118,7 @@ def _pool_worker(tasks, results, fn, initializer, initargs, parent_pid: int) -> 
     global _SINK
     signal.signal(signal.SIGINT, signal.SIG_IGN)  # the driver decides what Ctrl-C means
     die_with_parent(parent_pid)
-    # one process per core: keep numerical libraries from starting a thread per core each
-    for var in ("OMP_NUM_THREADS", "MKL_NUM_THREADS", "OPENBLAS_NUM_THREADS"):
-        os.environ[var] = "1"
-    add_xla_flags(*SINGLE_THREAD)
+    configure_worker()  # one process per core: one compute thread each
     _SINK = lambda payload: results.put(("msg", None, payload))  # noqa: E731
     try:
         if initializer is not None:

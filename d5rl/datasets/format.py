@@ -39,11 +39,12 @@ import os
 import shutil
 import socket
 from pathlib import Path
-from typing import Any, Iterable
+from typing import Iterable
 
 import numpy as np
 
 from d5rl.datasets import lock
+from d5rl.files import dump_json, owner_tag, write_atomic
 from d5rl.errors import D5RLError, DatasetCorruptError, DatasetVersionError
 
 FORMAT_VERSION = 1
@@ -75,27 +76,6 @@ def sha256_file(path: Path) -> str:
     return h.hexdigest()
 
 
-def dump_json(obj: Any, path: Path) -> None:
-    """Deterministic JSON (sorted keys), written atomically."""
-    tmp = path.with_name(path.name + f".tmp-{owner_tag()}")
-    with open(tmp, "w") as f:
-        json.dump(obj, f, indent=1, sort_keys=True, default=_json_default)
-        f.write("\n")
-        f.flush()
-        os.fsync(f.fileno())
-    os.replace(tmp, path)
-
-
-def _json_default(o: Any):
-    if isinstance(o, np.generic):
-        return o.item()
-    if isinstance(o, np.ndarray):
-        return o.tolist()
-    if isinstance(o, Path):
-        return str(o)
-    raise TypeError(f"{type(o).__name__} is not JSON serializable")
-
-
 def load_json(path: Path, what: str) -> dict:
     try:
         with open(path) as f:
@@ -123,11 +103,6 @@ def read_manifest(path: Path) -> dict:
 
 
 # --- temporaries: named after their owner, removed only when the owner is gone -----------------------------
-def owner_tag() -> str:
-    """``<host>-<pid>-<random>``: unique per writer, and says which process to ask whether it is alive."""
-    return f"{socket.gethostname()}-{os.getpid()}-{os.urandom(4).hex()}"
-
-
 def _owner_alive(name: str) -> bool:
     """Whether the process that made ``.<x>.tmp-<host>-<pid>-<random>`` may still be writing it."""
     tag = name.rsplit(".tmp-", 1)[-1] if ".tmp-" in name else name.rsplit(".old-", 1)[-1]
@@ -324,9 +299,7 @@ def write_stamp(shard_dir: Path, record: dict) -> None:
         return
     _STAMP_MEMO[str(shard_dir.resolve())] = stats
     try:
-        tmp = shard_dir / f"{STAMP}.tmp-{owner_tag()}"
-        tmp.write_text(json.dumps(stats, sort_keys=True))
-        os.replace(tmp, shard_dir / STAMP)
+        write_atomic(shard_dir / STAMP, json.dumps(stats, sort_keys=True))
     except OSError:
         pass  # read-only dataset: the in-process memo still spares re-hashing within this process
 

@@ -25,6 +25,7 @@ from d5rl.datasets import format as fmt
 from d5rl.datasets import lock
 from d5rl.datasets.episode import Episode
 from d5rl.errors import D5RLError, DatasetVersionError
+from d5rl.files import dump_json, json_default
 from d5rl.registry import DatasetSpec, TaskSpec, get_spec, resolve
 
 MAX_SEED = 2**63 - 1
@@ -86,7 +87,7 @@ def _json_normal(obj):
     """``obj`` as it reads back from JSON (tuples become lists), so comparisons with disk are exact."""
     import json
 
-    return json.loads(json.dumps(obj, default=fmt._json_default))
+    return json.loads(json.dumps(obj, default=json_default))
 
 
 # --- worker side -------------------------------------------------------------------------------------
@@ -298,5 +299,5 @@ def write_manifest(root: Path, dspec: DatasetSpec, ident: dict, records: list[di
         "packages": fmt.package_versions(),
     }
     with lock.publishing(root):  # replaces the old manifest (if extending) in one step
-        fmt.dump_json(manifest, root / fmt.MANIFEST)
+        dump_json(manifest, root / fmt.MANIFEST)
     return manifest

@@ -23,7 +23,9 @@ from typing import Iterable
 
 from d5rl.errors import D5RLError
 from d5rl.parallel import connect_ray
-from d5rl.runner.execute import (EXIT_CODES, LOG_FILE, atomic_write_text, clear_job_outputs, configure_worker,
+from d5rl.files import write_atomic
+from d5rl.parallel import configure_worker
+from d5rl.runner.execute import (EXIT_CODES, LOG_FILE, clear_job_outputs,
                                  execute_cell, is_done, read_failures, record_failure, write_cell_file)
 from d5rl.runner.grid import DEFAULT_JOB, Cell, GridError, read_cell
 
@@ -81,7 +83,7 @@ def prepare(cells: Iterable[Cell], run_dir: Path | str, argv: list[str] | None =
         "time": time.strftime("%Y-%m-%dT%H:%M:%S%z"), "host": socket.gethostname(),
         "argv": argv if argv is not None else sys.argv, "cells": [c.key for c in cells],
     })
-    atomic_write_text(log_path, json.dumps(launches, indent=2) + "\n")
+    write_atomic(log_path, json.dumps(launches, indent=2) + "\n")
     return cells
 
 
@@ -215,7 +217,7 @@ def _start_worker(cell: Cell, cdir: Path, attempt: int, single_thread: bool, nic
                "nice": nice, "sys_path": [p for p in sys.path if p]}
     cdir.mkdir(parents=True, exist_ok=True)
     spec = cdir / ".worker.json"
-    atomic_write_text(spec, json.dumps(payload))
+    write_atomic(spec, json.dumps(payload))
     env = dict(os.environ)
     pkg_root = str(Path(__file__).resolve().parents[2])  # so `-m d5rl.runner.worker` finds this d5rl
     env["PYTHONPATH"] = os.pathsep.join([pkg_root] + [p for p in env.get("PYTHONPATH", "").split(os.pathsep) if p])

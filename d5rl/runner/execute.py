@@ -28,41 +28,11 @@ from pathlib import Path
 
 from d5rl.runner.grid import (CELL_FILE, DONE_FILE, ERROR_FILE, FAILURES_FILE, LOCK_FILE, LOG_FILE,
                               RUNNER_FILES, Cell)
-from d5rl.xla_flags import SINGLE_THREAD, add_xla_flags
-
-# Environment of a worker: one compute thread per process, so K workers use K cores.
-SINGLE_THREAD_ENV = {
-    "OMP_NUM_THREADS": "1",
-    "MKL_NUM_THREADS": "1",
-    "OPENBLAS_NUM_THREADS": "1",
-    "TF_CPP_MIN_LOG_LEVEL": "2",
-    "XLA_PYTHON_CLIENT_PREALLOCATE": "false",  # several jobs may share one GPU
-}
-
-
-def configure_worker(single_thread: bool = True, nice: int = 0) -> None:
-    """Set the per-process environment before any numerical library is imported."""
-    if single_thread:
-        add_xla_flags(*SINGLE_THREAD)
-        for k, v in SINGLE_THREAD_ENV.items():
-            os.environ.setdefault(k, v)
-    if nice:
-        with contextlib.suppress(OSError):
-            os.nice(nice)
-
-
-def atomic_write_text(path: Path, text: str) -> None:
-    tmp = path.with_name(f".{path.name}.tmp.{os.getpid()}")
-    with open(tmp, "w") as f:
-        f.write(text)
-        f.flush()
-        os.fsync(f.fileno())
-    os.replace(tmp, path)
-
+from d5rl.files import write_atomic
 
 def write_cell_file(cell: Cell, cell_dir: Path) -> None:
     cell_dir.mkdir(parents=True, exist_ok=True)
-    atomic_write_text(cell_dir / CELL_FILE, json.dumps(cell.to_json(), indent=2, sort_keys=True) + "\n")
+    write_atomic(cell_dir / CELL_FILE, json.dumps(cell.to_json(), indent=2, sort_keys=True) + "\n")
 
 
 def read_failures(cell_dir: Path) -> list[dict]:
@@ -140,7 +110,7 @@ def record_failure(cell_dir: Path, attempt: int, error: str, tb: str, wall_s: fl
     }
     with open(cell_dir / FAILURES_FILE, "a") as f:
         f.write(json.dumps(rec) + "\n")
-    atomic_write_text(cell_dir / ERROR_FILE, f"attempt {attempt}: {error}\n\n{tb}")
+    write_atomic(cell_dir / ERROR_FILE, f"attempt {attempt}: {error}\n\n{tb}")
     return rec
 
 
@@ -185,7 +155,7 @@ def execute_cell(cell_json: dict, cell_dir: str, attempt: int = 1, capture_outpu
             "finished": time.strftime("%Y-%m-%dT%H:%M:%S%z"),
             "summary": summary if isinstance(summary, dict) else None,
         }
-        atomic_write_text(cdir / DONE_FILE, json.dumps(done, indent=2, default=str) + "\n")
+        write_atomic(cdir / DONE_FILE, json.dumps(done, indent=2, default=str) + "\n")
         return {"status": "ok", "key": cell.key, "wall_s": wall}
 
 

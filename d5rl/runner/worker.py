@@ -11,15 +11,14 @@ import sys
 
 
 def main(argv: list[str] | None = None) -> int:
-    from d5rl.parallel import die_with_parent  # light imports only
+    from d5rl.parallel import configure_worker, die_with_parent  # light imports only
 
     die_with_parent()  # no orphan races a resumed sweep
     argv = sys.argv[1:] if argv is None else argv
     with open(argv[0]) as f:
         spec = json.load(f)
-    from d5rl.runner.execute import EXIT_CODES, configure_worker  # light imports only
-
     configure_worker(spec.get("single_thread", True), spec.get("nice", 0))  # before JAX is imported
+    from d5rl.runner.execute import EXIT_CODES
     for p in reversed(spec.get("sys_path", [])):  # the caller's import path (its jobs, test modules)
         if p not in sys.path:
             sys.path.insert(0, p)

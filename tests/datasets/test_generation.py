@@ -13,6 +13,7 @@ from d5rl.datasets import format as fmt
 from d5rl.datasets.generation import dataset_root, generate
 from d5rl.datasets.loading import load_dataset
 from d5rl.datasets.verify import verify_dataset
+from d5rl.files import dump_json
 from d5rl.errors import DatasetCorruptError, DatasetNotFoundError, DatasetVersionError
 from tests.datasets.toy import register_toy
 
@@ -181,7 +182,7 @@ def test_bad_format_version_is_refused():
     root = generate(spec, progress=False)
     rec = fmt.load_json(root / "shards/shard-00000/shard.json", "x")
     rec["format_version"] = 999
-    fmt.dump_json(rec, root / "shards/shard-00000/shard.json")
+    dump_json(rec, root / "shards/shard-00000/shard.json")
     with pytest.raises(DatasetVersionError, match="format version 999"):
         load_dataset(spec, generate=False)
 

@@ -24,6 +24,7 @@ from d5rl.datasets import format as fmt
 from d5rl.envs.base import STATE_SPEC
 from d5rl.envs.kitchen.subtasks import MIXED, PARTIAL, SUBTASK_NAMES, CompletionChecker
 from d5rl.errors import D5RLError, MissingDependencyError
+from d5rl.files import dump_json
 
 NAME = "kitchen-d4rl"
 TASKS = {"mixed": MIXED, "partial": PARTIAL}
@@ -149,7 +150,7 @@ def import_file(path: str | Path, out: str | Path | None = None, *, task: str = 
         "num_episodes": shards[-1]["episodes"][1] if shards else 0,
         "shards": shards,
     }
-    fmt.dump_json(manifest, root / fmt.MANIFEST)
+    dump_json(manifest, root / fmt.MANIFEST)
     renders(None, root, manifest, episodes=manifest["num_episodes"], workers=workers, progress=progress,
             cameras=tuple(cameras), size=size)
     return root
