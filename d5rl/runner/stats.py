@@ -14,6 +14,12 @@ Precipice" (NeurIPS 2021; the ``rliable`` package), in plain numpy:
 
 Scores are given per task as a list of 1-D arrays (ragged: a task may have fewer
 seeds if a run failed).
+
+Why not ``rliable`` itself: rliable 1.2.0 installs under requirements/lock.txt but fails to import
+(``deprecate_kwarg() missing 1 required positional argument`` from its arch/statsmodels stack with
+pandas 3), and would add arch, pandas, seaborn and statsmodels to the install.  These ~100 lines are
+tested against ``scipy.stats.trim_mean`` and against exhaustive enumeration of every resample
+(tests/runner/test_stats.py).
 """
 
 from __future__ import annotations
