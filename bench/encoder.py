@@ -102,7 +102,7 @@ def jax_encoder(batch, rng):
 def torch_encoder(batch, rng, channels_last: bool):
     import torch
 
-    from agents import torch_impala  # bench/agents.py: the reference encoder bench/agents.py times
+    from torch_reference import torch_impala  # the reference encoder bench/agents.py times
 
     net = torch_impala()(3 * STACK * CAMS)
     x = torch.from_numpy(rng.random((batch, 3 * STACK * CAMS, PIX, PIX), dtype=np.float32))

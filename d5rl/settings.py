@@ -45,8 +45,9 @@ def task_keys(task_id: str) -> tuple[str, str]:
     return spec.benchmark_group, spec.observation
 
 
-def layers(task_id: str, algo: str) -> tuple[dict, dict]:
-    """``(agent values, training-loop values)`` the settings file gives a task and algorithm."""
+def layers(task_id: str, algo: str, agent_keys=None) -> tuple[dict, dict]:
+    """``(agent values, training-loop values)`` the settings file gives a task and algorithm; "all"
+    entries apply the keys the agent has (``agent_keys``; every key if None)."""
     from d5rl.agents import canonical_name
 
     algo = canonical_name(algo)
@@ -54,7 +55,7 @@ def layers(task_id: str, algo: str) -> tuple[dict, dict]:
     data = table()
     agent: dict[str, Any] = {}
     for section in (data["observations"].get(obs, {}), data["groups"].get(group, {}).get(obs, {})):
-        agent.update(_plain(section.get("all")))
+        agent.update({k: v for k, v in _plain(section.get("all")).items() if agent_keys is None or k in agent_keys})
         agent.update(_plain(section.get(algo)))
     return agent, _plain(data["protocol"].get(group))
 
@@ -83,8 +84,9 @@ def resolve(algo: str, task_id: str, overrides: Iterable[str] | Mapping[str, Any
     from d5rl.training.config import TRAIN_BOUNDS, get_train_config, split_overrides
 
     agent_cls, config_fn = get_agent(algo)
-    agent_layer, train_layer = layers(task_id, algo) if tuned else ({}, {})
-    agent_cfg, train_cfg = config_fn().override(agent_layer), get_train_config().override(train_layer)
+    defaults = config_fn()
+    agent_layer, train_layer = layers(task_id, algo, defaults) if tuned else ({}, {})
+    agent_cfg, train_cfg = defaults.override(agent_layer), get_train_config().override(train_layer)
     agent_cfg, train_cfg = split_overrides(overrides, agent_cfg, train_cfg)
     check_bounds(agent_cfg, AGENT_BOUNDS)
     check_bounds(train_cfg, TRAIN_BOUNDS)

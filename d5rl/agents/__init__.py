@@ -29,6 +29,9 @@ AGENTS = {
     "rlpd": ("d5rl.agents.rlpd", "RLPDAgent"),
     "ddpm_bc": ("d5rl.agents.ddpm_bc", "DDPMBCAgent"),
     "idql": ("d5rl.agents.idql", "IDQLAgent"),
+    # modern baselines beyond the paper's eight
+    "fql": ("d5rl.agents.fql", "FQLAgent"),
+    "rebrac": ("d5rl.agents.rebrac", "ReBRACAgent"),
 }
 
 

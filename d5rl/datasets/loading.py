@@ -200,6 +200,7 @@ class Dataset:
         n_step: int = 1,
         gamma: float = 0.99,
         mc_gamma: float | None = None,
+        next_actions: bool = False,
         indices: np.ndarray | None = None,
     ) -> dict[str, Any]:
         """A batch of random transitions.
@@ -208,7 +209,8 @@ class Dataset:
         ``masks`` (1 - terminal), ``next_observations``; with ``n_step > 1`` the rewards
         are discounted n-step sums, ``next_observations`` is n steps ahead (or the
         episode's last step) and ``discounts`` is gamma^n (0 past a terminal);
-        ``mc_returns`` when ``mc_gamma`` is given.
+        ``mc_returns`` when ``mc_gamma`` is given; ``next_actions`` (the data's action at the next
+        step of the same episode; an episode's last transition repeats its own) when asked.
         """
         idx = rng.integers(0, self.num_transitions, size=batch_size) if indices is None else np.asarray(indices)
         eps = self.transition_episode[idx]
@@ -232,6 +234,9 @@ class Dataset:
             batch["masks"] = 1.0 - batch["terminals"].astype(np.float32)
         if mc_gamma is not None:
             batch["mc_returns"] = self.mc_returns(mc_gamma)[idx]
+        if next_actions:
+            ep_last = self.episode_starts[eps] + self.episode_lengths[eps] - 1
+            batch["next_actions"] = self.arrays["actions"][np.minimum(idx + 1, ep_last)]
         return batch
 
     def _n_step(self, idx, eps, n, gamma):

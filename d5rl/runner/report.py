@@ -37,7 +37,7 @@ from d5rl.runner.logs import final_scores, read_evals
 # Paper order and display names; algorithms outside this list follow in alphabetical order.
 METHODS = {
     "bc": "BC", "iql": "IQL", "cql": "CQL", "calql": "CalQL", "td3bc": "TD3+BC", "rlpd": "RLPD",
-    "ddpm_bc": "DDPM+BC", "idql": "IDQL",
+    "ddpm_bc": "DDPM+BC", "idql": "IDQL", "fql": "FQL", "rebrac": "ReBRAC",
 }
 # (benchmark group, environment label) in the paper's row order.
 ENVIRONMENTS = [

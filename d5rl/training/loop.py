@@ -239,6 +239,7 @@ def online_phase(run: Run, agent, state: RunState):
         if crossed(prev, state.step, cfg.eval_interval) and state.step < total:
             run.evaluate(agent, state.step, cfg.eval_episodes)
         if term or trunc:
+            state.buffer.end_episode()
             if needs_mc:
                 state.buffer.set_mc_returns(ep_idx, ep_rew, run.sampler.mc_gamma)
             run.logger.log(state.step, {"train/episode_return": sum(ep_rew), "train/episode_length": len(ep_rew)})

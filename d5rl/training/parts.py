@@ -18,7 +18,7 @@ from d5rl.training.logger import Logger
 from d5rl.training.replay import ReplayBuffer
 
 BATCH_KEYS = ("observations", "actions", "rewards", "masks", "next_observations")
-FLOAT_KEYS = ("rewards", "masks", "mc_returns")
+FLOAT_KEYS = ("rewards", "masks", "mc_returns", "next_actions")
 
 
 class NonFiniteLossError(D5RLError, FloatingPointError):
@@ -53,16 +53,24 @@ class RunState:
 
 class Sampler:
     """Offline batches as the agent wants them: stacked frames, float32 scalars, and the agent's extra
-    keys (``mc_returns``: Monte-Carlo returns with the agent's discount)."""
+    keys (``mc_returns``: Monte-Carlo returns with the agent's discount; ``next_actions``: the data's
+    action at the next step)."""
+
+    EXTRA_KEYS = ("mc_returns", "next_actions")
 
     def __init__(self, dataset, frame_stack: int, extra_keys: tuple[str, ...], discount: float):
+        unknown = [k for k in extra_keys if k not in self.EXTRA_KEYS]
+        if unknown:
+            raise ValueError(f"no sampler for batch keys {unknown}; it makes {self.EXTRA_KEYS}")
         self.dataset, self.frame_stack = dataset, int(frame_stack)
         self.keys = BATCH_KEYS + tuple(extra_keys)
         self.mc_gamma = float(discount) if "mc_returns" in self.keys else None
 
     def sample(self, n: int, rng: np.random.Generator) -> dict:
-        b = self.dataset.sample(n, rng, frame_stack=self.frame_stack,
-                                **({"mc_gamma": self.mc_gamma} if self.mc_gamma is not None else {}))
+        extra = {"mc_gamma": self.mc_gamma} if self.mc_gamma is not None else {}
+        if "next_actions" in self.keys:
+            extra["next_actions"] = True
+        b = self.dataset.sample(n, rng, frame_stack=self.frame_stack, **extra)
         return as_batch(b, self.keys)
 
     def sample_stacked(self, k: int, n: int, rng: np.random.Generator) -> dict:

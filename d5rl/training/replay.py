@@ -6,7 +6,7 @@ from typing import Any
 
 import numpy as np
 
-FIELDS = ("actions", "rewards", "masks", "mc_returns")
+FIELDS = ("actions", "rewards", "masks", "mc_returns", "next_actions")
 # mc_returns of transitions whose episode has not finished yet: no lower bound.
 NO_RETURN = np.float32(-1e9)
 
@@ -28,9 +28,12 @@ class ReplayBuffer:
             "rewards": np.empty(self.capacity, np.float32),
             "masks": np.empty(self.capacity, np.float32),
             "mc_returns": np.full(self.capacity, NO_RETURN, np.float32),
+            # the action taken at the next step of the same episode (the last step repeats its own)
+            "next_actions": np.empty((self.capacity, action_dim), np.float32),
         }
         self.size = 0
         self.pos = 0
+        self._prev: int | None = None  # the previous transition of the episode being collected
 
     def __len__(self) -> int:
         return self.size
@@ -45,9 +48,17 @@ class ReplayBuffer:
         self.data["rewards"][i] = reward
         self.data["masks"][i] = mask
         self.data["mc_returns"][i] = NO_RETURN
+        self.data["next_actions"][i] = action
+        if self._prev is not None:
+            self.data["next_actions"][self._prev] = action
+        self._prev = i
         self.pos = (self.pos + 1) % self.capacity
         self.size = min(self.size + 1, self.capacity)
         return i
+
+    def end_episode(self) -> None:
+        """The episode being collected ended: the next insert starts a new one."""
+        self._prev = None
 
     def set_mc_returns(self, indices: list[int], rewards: list[float], gamma: float, bootstrap: float = 0.0) -> None:
         """Fill the discounted reward-to-go of one finished episode (indices in time order)."""

@@ -7,7 +7,7 @@ import numpy as np
 from d5rl.agents import get_agent
 from d5rl.envs.toy.data import toy_dataset
 
-KEYS = ("observations", "actions", "rewards", "masks", "next_observations", "mc_returns")
+KEYS = ("observations", "actions", "rewards", "masks", "next_observations", "mc_returns", "next_actions")
 
 _DS = {}
 
@@ -24,7 +24,8 @@ def small_config(name: str, **overrides):
     _, get_config = get_agent(name)
     cfg = get_config()
     small = {"batch_size": 64}
-    for k, v in (("hidden_dims", (64, 64)), ("critic_hidden_dims", (64, 64)), ("hidden_dim", 64),
+    for k, v in (("hidden_dims", (64, 64)), ("critic_hidden_dims", (64, 64)), ("actor_hidden_dims", (64, 64)),
+                 ("hidden_dim", 64),
                  ("num_blocks", 2), ("cql_n_actions", 4), ("num_samples", 8), ("utd_ratio", 2),
                  ("encoder_channels", (8, 8, 8)), ("actor_ema", 0.05)):
         if k in cfg:
@@ -42,7 +43,7 @@ def make_agent(name: str, ds=None, seed: int = 0, **overrides):
 
 
 def batch(ds, n: int, rng, pixels: bool = False):
-    b = ds.sample(n, rng, mc_gamma=0.99)
+    b = ds.sample(n, rng, mc_gamma=0.99, next_actions=True)
     out = {}
     for k in KEYS:
         v = b[k]

@@ -210,6 +210,70 @@ def test_td3bc_losses():
     close(agent.actor_loss(agent.actor.params, b)[0], -lam * q1.mean() + ((a - b["actions"]) ** 2).mean())
 
 
+# --- ReBRAC ------------------------------------------------------------------------------------------------
+def test_rebrac_losses_penalize_both_sides():
+    agent = make("rebrac", actor_bc_coef=0.3, critic_bc_coef=0.7, discount=0.9, policy_noise=0.2, noise_clip=0.3)
+    b, key = batch(), jax.random.PRNGKey(8)
+    b["next_actions"] = np.random.default_rng(3).uniform(-0.9, 0.9, (B, ACT)).astype(np.float32)
+
+    def pi(params, obs):
+        p = P(params)
+        h = mlp(p["MLP_0"], obs.astype(np.float64), len(p["MLP_0"]), activate_final=True)
+        return np.tanh(h @ p["Dense_0"]["kernel"] + p["Dense_0"]["bias"])
+
+    noise = np.clip(0.2 * np.asarray(jax.random.normal(key, (B, ACT)), np.float64), -0.3, 0.3)
+    a_next = np.clip(pi(agent.target_actor_params, b["next_observations"]) + noise, -1, 1)
+    penalty = ((a_next - b["next_actions"]) ** 2).sum(-1)
+    next_q = critic(agent.target_critic_params, b["next_observations"], a_next, ln=True).min(0)
+    target = b["rewards"] + 0.9 * b["masks"] * (next_q - 0.7 * penalty)
+    qs = critic(agent.critic.params, b["observations"], b["actions"], ln=True)
+    close(agent.critic_loss(agent.critic.params, b, key)[0], ((qs - target) ** 2).mean(1).sum())
+    a = pi(agent.actor.params, b["observations"])
+    q = critic(agent.critic.params, b["observations"], a, ln=True).min(0)
+    want = (0.3 * ((a - b["actions"]) ** 2).sum(-1) - q / np.abs(q).mean()).mean()
+    close(agent.actor_loss(agent.actor.params, b)[0], want)
+
+
+# --- FQL ----------------------------------------------------------------------------------------------------
+def test_fql_losses():
+    agent = make("fql", actor_hidden_dims=(8, 8), critic_hidden_dims=(8, 8), alpha=3.0, flow_steps=4, discount=0.9)
+    b = batch()
+
+    def field(params, obs, x, t=None):
+        p = P(params)
+        parts = [obs, x] + ([t] if t is not None else [])
+        h = mlp(p["MLP_0"], np.concatenate(parts, -1).astype(np.float64), len(p["MLP_0"]), activate_final=True)
+        return h @ p["Dense_0"]["kernel"] + p["Dense_0"]["bias"]
+
+    # critic: r + γ·mask·mean of the two target critics at a' = clip(μ(s', z'))
+    key = jax.random.PRNGKey(9)
+    z = np.asarray(jax.random.normal(key, (B, ACT)), np.float64)
+    a_next = np.clip(field(agent.actor.params, b["next_observations"], z), -1, 1)
+    target = b["rewards"] + 0.9 * b["masks"] * critic(agent.target_critic_params, b["next_observations"], a_next,
+                                                     ln=True).mean(0)
+    qs = critic(agent.critic.params, b["observations"], b["actions"], ln=True)
+    close(agent.critic_loss(agent.critic.params, b, key)[0], ((qs - target) ** 2).mean())
+    # behaviour flow: flow matching from z to the data's action
+    key = jax.random.PRNGKey(10)
+    k_z, k_t = jax.random.split(key)
+    z = np.asarray(jax.random.normal(k_z, (B, ACT)), np.float64)
+    t = np.asarray(jax.random.uniform(k_t, (B, 1)), np.float64)
+    pred = field(agent.bc_flow.params, b["observations"], (1 - t) * z + t * b["actions"], t)
+    close(agent.bc_flow_loss(agent.bc_flow.params, b, key), ((pred - (b["actions"] - z)) ** 2).mean())
+    # one-step policy: α·‖μ(s, z) − Euler(flow)(s, z)‖² − mean_i Q_i(s, clip(μ(s, z)))
+    key = jax.random.PRNGKey(11)
+    k_z, _ = jax.random.split(key)
+    z = np.asarray(jax.random.normal(k_z, (B, ACT)), np.float64)
+    x = z.copy()
+    for i in range(4):
+        x = x + field(agent.bc_flow.params, b["observations"], x, np.full((B, 1), i / 4)) / 4
+    mu = field(agent.actor.params, b["observations"], z)
+    q = critic(agent.critic.params, b["observations"], np.clip(mu, -1, 1), ln=True).mean(0)
+    loss, info = agent.actor_loss(agent.actor.params, b, key)
+    close(info["actor/distill_loss"], ((mu - np.clip(x, -1, 1)) ** 2).mean())
+    close(loss, 3.0 * ((mu - np.clip(x, -1, 1)) ** 2).mean() - q.mean())
+
+
 # --- RLPD ---------------------------------------------------------------------------------------------------
 def test_rlpd_critic_loss_uses_a_random_subset_of_layernorm_critics():
     agent, b = make("rlpd", num_qs=4, num_min_qs=2, discount=0.9, backup_entropy=True), batch()

@@ -1,8 +1,8 @@
 """Offline RL beats behaviour cloning on a suboptimal dataset of the toy reach task.
 
 The dataset mixes 20% (noisy) expert steps with 80% uniformly random ones, so
-cloning it walks slowly; IQL, CQL and TD3+BC recover a much better policy from
-the same data in 1,500 updates.
+cloning it walks slowly; IQL, CQL, TD3+BC, ReBRAC and FQL recover a much better
+policy from the same data in 1,500 updates.
 """
 
 import numpy as np
@@ -17,6 +17,8 @@ OVERRIDES = {
     "iql": {"expectile": 0.9, "temperature": 10.0},
     "cql": {"cql_alpha": 1.0, "init_temperature": 0.1, "actor_lr": 3e-4},
     "td3bc": {},
+    "rebrac": {},
+    "fql": {"alpha": 1.0},  # this data is 80% random actions: a weak pull to the behaviour flow (FQL tunes alpha per task)
 }
 
 
@@ -32,7 +34,7 @@ def bc_score():
     return score("bc")
 
 
-@pytest.mark.parametrize("name", ["iql", "cql", "td3bc"])
+@pytest.mark.parametrize("name", ["iql", "cql", "td3bc", "rebrac", "fql"])
 def test_offline_rl_beats_bc(name, bc_score):
     s = score(name)
     assert np.isfinite(s)

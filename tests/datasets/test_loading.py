@@ -111,3 +111,14 @@ def test_obs_keys_selects_parts():
     assert set(ds.observations) == {"proprio"}
     with pytest.raises(KeyError, match="no"):
         load_dataset(spec, obs_keys=["depth"], progress=False)
+
+
+def test_next_actions_stay_within_the_episode():
+    from d5rl.envs.toy.data import toy_dataset
+
+    ds = toy_dataset(3)
+    last = ds.episode_starts + ds.episode_lengths - 1
+    idx = np.array([0, int(last[0]), int(last[0]) + 1, int(last[2])])
+    b = ds.sample(4, np.random.default_rng(0), next_actions=True, indices=idx)
+    acts = np.asarray(ds.actions)
+    np.testing.assert_array_equal(b["next_actions"], acts[[1, last[0], last[0] + 2, last[2]]])

@@ -82,3 +82,19 @@ def test_td3bc_run_normalizes_states_with_the_dataset_statistics(tmp_path):
     np.testing.assert_allclose(agent_cfg["obs_std"], obs.std(0) + 1e-3, rtol=1e-6)
     agent, _ = load_run(tmp_path / "t")
     assert agent.config.obs_mean == tuple(agent_cfg["obs_mean"])
+
+
+@pytest.mark.parametrize("algo", ["fql", "rebrac"])
+def test_modern_baselines_train_offline_then_online_from_the_cli(tmp_path, capsys, algo):
+    from d5rl.cli import main
+
+    small = ["actor_hidden_dims=16,16", "critic_hidden_dims=16,16"] if algo == "fql" else ["hidden_dims=16,16"]
+    args = ["train", algo, "toy-reach-v0", "--offline-steps", "16", "--online-steps", "30", "--run-dir",
+            str(tmp_path / "run")]
+    for s in small + ["batch_size=16", "eval_episodes=2", "eval_envs=2", "progress=false", "tensorboard=false"]:
+        args += ["--set", s]
+    assert main(args) == 0
+    summary = json.loads(capsys.readouterr().out)
+    assert summary["step"] == 46 and np.isfinite(summary["score"])
+    rows = [json.loads(x) for x in (tmp_path / "run" / "metrics.jsonl").read_text().splitlines()]
+    assert any("train/episode_return" in r for r in rows)  # the online phase ran (with next actions in the buffer)

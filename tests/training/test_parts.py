@@ -92,3 +92,13 @@ def test_evaluation_scores_info_scored_tasks_from_the_last_info():
         total, done = total + r, term or trunc
     assert out["returns"] == [total]
     assert out["score"] == d5rl.episode_score("wx-sorting-v0", total, info) == info["score"]
+
+
+def test_replay_buffer_next_actions_stay_within_episodes():
+    buf = ReplayBuffer(np.zeros(2, np.float32), 1, capacity=10)
+    obs = np.zeros(2, np.float32)
+    for episode in ((1.0, 2.0, 3.0), (7.0, 8.0)):
+        for a in episode:
+            buf.insert(obs, np.array([a]), 0.0, 1.0, obs)
+        buf.end_episode()
+    np.testing.assert_array_equal(buf.data["next_actions"][:5, 0], [2, 3, 3, 8, 8])  # the last step repeats its own
