@@ -364,7 +364,7 @@ def rebrac(k):
 
 def _sac_like(k, name: str):
     """CQL, Cal-QL (conservative critic, 10 sampled actions of each kind) or RLPD (10 LayerNorm critics, UTD 20)."""
-    torch, F, a_dim = k.torch, k.F, k.a_dim
+    torch, a_dim = k.torch, k.a_dim
     rlpd = name == "rlpd"
     nets = {"actor": k.Gauss(True, lmin=-20.0), "critic": k.Critic(10 if rlpd else 2, ln=rlpd)}
     tc = copy.deepcopy(nets["critic"])
