@@ -53,7 +53,8 @@ def main() -> None:
 
     from d5rl.datasets.format import ShardWriter
     from d5rl.datasets.generation import _concat
-    from d5rl.datasets.loading import ChunkedArray, Dataset, load_dataset
+    from d5rl.datasets.dataset import ChunkedArray, Dataset
+    from d5rl.datasets.loading import load_dataset
 
     tmp = None
     if args.task:

@@ -16,10 +16,8 @@ from __future__ import annotations
 import jax
 import jax.numpy as jnp
 
-from d5rl.agents.common import ENCODER_DEFAULTS, copy_tree, make_train_state, obs_ndims, prepare_example
+from d5rl.agents.common import ENCODER_DEFAULTS
 from d5rl.agents.config import Config
-from d5rl.agents.encoders import make_encoder
-from d5rl.agents.networks import Critic, DeterministicPolicy
 from d5rl.agents.td3bc import TD3BCAgent
 
 
@@ -50,16 +48,7 @@ class ReBRACAgent(TD3BCAgent):
 
     @classmethod
     def create(cls, seed: int, example_observations, example_actions, config: Config | None = None):
-        config = get_config() if config is None else config
-        ex_obs, ex_act = prepare_example(example_observations, example_actions)
-        rng, k_a, k_c = jax.random.split(jax.random.PRNGKey(seed), 3)
-        actor_def = DeterministicPolicy(make_encoder(config), config.hidden_dims, ex_act.shape[-1],
-                                        layer_norm=config.actor_layer_norm)
-        critic_def = Critic(make_encoder(config), config.hidden_dims, 2, config.critic_layer_norm)
-        actor = make_train_state(actor_def, k_a, (ex_obs,), config.actor_lr)
-        critic = make_train_state(critic_def, k_c, (ex_obs, ex_act), config.critic_lr)
-        return cls(rng=rng, actor=actor, target_actor_params=copy_tree(actor.params), critic=critic,
-                   target_critic_params=copy_tree(critic.params), config=config, obs_ndim=obs_ndims(ex_obs))
+        return super().create(seed, example_observations, example_actions, get_config() if config is None else config)
 
 
 def get_config() -> Config:

@@ -157,7 +157,8 @@ class TD3BCAgent(Agent):
         config = get_config() if config is None else config
         ex_obs, ex_act = prepare_example(example_observations, example_actions)
         rng, k_a, k_c = jax.random.split(jax.random.PRNGKey(seed), 3)
-        actor_def = DeterministicPolicy(make_encoder(config), config.hidden_dims, ex_act.shape[-1])
+        actor_def = DeterministicPolicy(make_encoder(config), config.hidden_dims, ex_act.shape[-1],
+                                        layer_norm=config.actor_layer_norm)
         critic_def = Critic(make_encoder(config), config.hidden_dims, 2, config.critic_layer_norm)
         actor = make_train_state(actor_def, k_a, (ex_obs,), config.actor_lr)
         critic = make_train_state(critic_def, k_c, (ex_obs, ex_act), config.critic_lr)
@@ -179,6 +180,7 @@ def get_config() -> Config:
         policy_freq=2,  # actor/target update every this many critic updates (TD3)
         exploration_noise=0.1,  # Gaussian action noise when collecting online data (TD3)
         critic_layer_norm=False,  # LayerNorm in the critics
+        actor_layer_norm=False,  # LayerNorm in the actor
         normalize_observations=True,  # standardise state observations with the dataset's statistics (TD3+BC)
         obs_mean=None,  # per-dimension mean, filled by `d5rl train` when normalizing (None: identity)
         obs_std=None,  # per-dimension std + 1e-3 (TD3+BC's epsilon), filled alike

@@ -2,7 +2,8 @@ import numpy as np
 import pytest
 
 from d5rl.datasets.episode import Episode
-from d5rl.datasets.loading import ChunkedArray, Dataset, load_dataset
+from d5rl.datasets.dataset import ChunkedArray, Dataset
+from d5rl.datasets.loading import load_dataset
 from tests.datasets.toy import register_toy
 
 

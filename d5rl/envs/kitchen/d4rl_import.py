@@ -158,7 +158,8 @@ def import_file(path: str | Path, out: str | Path | None = None, *, task: str = 
 
 def load_imported(root: str | Path, cameras=("overview", "wrist"), size: int = 64, **kwargs):
     """Open an imported dataset (rendering the requested cameras first if needed)."""
-    from d5rl.datasets.loading import Dataset, _shard_chunks
+    from d5rl.datasets.dataset import Dataset
+    from d5rl.datasets.loading import _shard_chunks
     from d5rl.envs.kitchen.data import renders
 
     root = Path(root).expanduser()

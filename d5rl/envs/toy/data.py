@@ -41,8 +41,8 @@ def toy_episode(rng: np.random.Generator, expert_prob: float, noise: float, pixe
 
 def toy_dataset(num_episodes: int = 200, seed: int = 0, expert_prob: float = 0.3, noise: float = 0.3,
                 pixels: bool = False):
-    """A :class:`~d5rl.datasets.loading.Dataset` of ``num_episodes`` suboptimal episodes."""
-    from d5rl.datasets.loading import Dataset
+    """A :class:`~d5rl.datasets.dataset.Dataset` of ``num_episodes`` suboptimal episodes."""
+    from d5rl.datasets.dataset import Dataset
 
     rng = np.random.default_rng(seed)
     eps = [toy_episode(rng, expert_prob, noise, pixels) for _ in range(num_episodes)]

@@ -1,7 +1,7 @@
 import numpy as np
 import pytest
 
-from d5rl.datasets.loading import Dataset
+from d5rl.datasets.dataset import Dataset
 from d5rl.envs.kitchen.randomized import data as rd
 from d5rl.envs.kitchen.subtasks import PARTIAL
 
