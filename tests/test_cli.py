@@ -27,6 +27,14 @@ def test_generate_verify_and_corruption_report(capsys):
     assert main(["verify", spec.id]) == 0
 
 
+def test_task_prefixes_glob_and_state_twins():
+    from d5rl.runner.cli import resolve_tasks
+
+    assert resolve_tasks(["kitchen-standard"]) == ["kitchen-standard-mixed-v0", "kitchen-standard-partial-v0"]
+    assert resolve_tasks(["wx-*-state-v0"]) == ["wx-sorting-pickplacedata-state-v0", "wx-sorting-state-v0"]
+    assert len(resolve_tasks(["a1", "kitchen-*-state-v0", "wx-*-state-v0"])) == 11
+
+
 def test_bad_task_is_one_clear_line_not_a_traceback(capsys):
     assert main(["info", "a1-wallk"]) == 2
     err = capsys.readouterr().err

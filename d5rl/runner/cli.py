@@ -11,8 +11,9 @@ from d5rl.errors import D5RLError
 
 
 def resolve_tasks(names: list[str]) -> list[str]:
-    """Task ids; a family or prefix (``a1``, ``kitchen-standard``) stands for all its registered tasks,
-    a glob (``'kitchen-*-state-v0'``) for those it matches."""
+    """Task ids; a family or prefix (``a1``, ``kitchen-standard``) stands for all its registered tasks
+    except the ``-state`` twins of camera tasks (the benchmark's rows), a glob (``'kitchen-*-state-v0'``)
+    for those it matches."""
     import fnmatch
 
     from d5rl.registry import TASK_ID_RE, get_spec, list_tasks
@@ -31,7 +32,8 @@ def resolve_tasks(names: list[str]) -> list[str]:
             elif TASK_ID_RE.match(part):
                 out.append(get_spec(part).id)  # unknown ids raise with suggestions
             else:
-                matches = [t for t in list_tasks() if t.startswith(part + "-")]
+                matches = [t for t in list_tasks() if t.startswith(part + "-")
+                           and (not t.endswith("-state-v0") or "state" in part)]
                 if not matches:
                     raise D5RLError(f"no registered task is or starts with {part!r}",
                                     "run `d5rl list` to see the task ids")
