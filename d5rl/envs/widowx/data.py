@@ -42,7 +42,7 @@ PICKPLACE_STEPS = 60
 class WidowXScriptedGenerator:
     """Episode generator for both WidowX datasets (see the module docstring)."""
 
-    version = "wx-scripted-1"
+    version = "wx-scripted-2"  # 2: objects dropped in random orientations and settled; grasps across the narrow side seen from above
 
     def __init__(self, task_id: str = "", mode: str = "sorting", p_wrong: float = 0.3,
                  episode_steps: int | None = None, noise: float = 0.15):

@@ -37,6 +37,11 @@ class SceneIndex:
         a = self.obj_qpos[name]
         return data.qpos[a: a + 3].copy(), data.qpos[a + 3: a + 7].copy()
 
+    def object_speed(self, data: mujoco.MjData, name: str) -> float:
+        """Linear speed plus 0.1 m x angular speed of an object (m/s)."""
+        v = self.obj_dof[name]
+        return float(np.linalg.norm(data.qvel[v: v + 3]) + 0.1 * np.linalg.norm(data.qvel[v + 3: v + 6]))
+
     def set_object_pose(self, data: mujoco.MjData, name: str, pos, quat) -> None:
         a, v = self.obj_qpos[name], self.obj_dof[name]
         data.qpos[a: a + 3] = pos
@@ -78,3 +83,22 @@ def in_bin(pos: np.ndarray, bin_name: str) -> bool:
 
 def yaw_quat(yaw: float) -> np.ndarray:
     return np.array([math.cos(yaw / 2), 0.0, 0.0, math.sin(yaw / 2)])
+
+
+def random_quat(rng: np.random.Generator) -> np.ndarray:
+    """A uniformly random orientation (a normalized 4-D Gaussian), as MuJoCo's w-x-y-z quaternion."""
+    q = rng.normal(size=4)
+    return q / np.linalg.norm(q)
+
+
+def bbox_corners(index: SceneIndex, name: str) -> np.ndarray:
+    """The 8 corners of an object's local bounding box, (8, 3) in its body frame."""
+    lo, hi = index.obj_local_bbox[name]
+    return np.array([[x, y, z] for x in (lo[0], hi[0]) for y in (lo[1], hi[1]) for z in (lo[2], hi[2])])
+
+
+def lowest_point(index: SceneIndex, name: str, quat) -> float:
+    """The lowest z of the object's bounding box when its body frame is rotated by ``quat``."""
+    mat = np.zeros(9)
+    mujoco.mju_quat2Mat(mat, np.asarray(quat, np.float64))
+    return float((bbox_corners(index, name) @ mat.reshape(3, 3).T)[:, 2].min())

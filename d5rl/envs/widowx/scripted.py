@@ -17,6 +17,7 @@ import math
 import numpy as np
 
 from d5rl.envs.widowx import model as wm
+from d5rl.envs.widowx import scene as wscene
 
 STAGES = ("approach", "descend", "grasp", "lift", "carry", "release", "retreat", "done")
 HOVER_Z = 0.14
@@ -51,14 +52,16 @@ class ScriptedSorter:
         return STAGES[self.stage]
 
     def _grasp_point(self, name: str) -> tuple[np.ndarray, float]:
+        """Above the object's centre, the fingers closing across its narrowest horizontal extent
+        (the minor principal axis of its bounding box seen from above: objects lie in any orientation)."""
         env = self.env
         body = env.index.obj_body[name]
         xmat = env.data.xmat[body].reshape(3, 3)
-        lo, hi = env.index.obj_local_bbox[name]
-        center = env.data.xpos[body] + xmat @ ((lo + hi) / 2)
-        axis = xmat[:, 1]  # close across the body's y axis (the narrow side of every object in the pool)
-        yaw = math.atan2(axis[1], axis[0])
-        return center[:2], yaw
+        corners = env.data.xpos[body] + wscene.bbox_corners(env.index, name) @ xmat.T
+        xy = corners[:, :2] - corners[:, :2].mean(0)
+        _, vecs = np.linalg.eigh(xy.T @ xy)
+        axis = vecs[:, 0]  # eigh sorts eigenvalues ascending: the narrow direction
+        return corners[:, :2].mean(0), math.atan2(axis[1], axis[0])
 
     def _move(self, target_xyz, yaw, grip) -> np.ndarray:
         env = self.env

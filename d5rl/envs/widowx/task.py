@@ -31,8 +31,11 @@ Reward
 
 Start state
     The arm at a home pose above the table (±1.5 cm noise), gripper open; the
-    objects dropped from 5 mm with random yaw in x ∈ [0.22, 0.36], y ∈
-    [-0.07, 0.07] m, at least 9 cm apart, then settled for 0.3 s.
+    objects dropped in uniformly random orientations (the paper's "random
+    quaternion"; ``options={"upright": True}``: standing, random yaw), their lowest
+    point 1 cm above the table, in x ∈ [0.22, 0.36], y ∈ [-0.07, 0.07] m, at least
+    9 cm apart, then simulated until they are at rest (0.3–3 s): the first
+    observation shows a settled scene.
 
 Episode end
     No termination; the time limit is ``MAX_EPISODE_STEPS`` = 120 control steps
@@ -60,7 +63,10 @@ from d5rl.envs.widowx import scene as wscene
 
 FRAME_SKIP = 50  # 10 Hz control with 2 ms physics steps
 HOME_POSE = np.array([0.22, 0.0, 0.18, math.pi / 2])
-SETTLE_STEPS = 150  # 0.3 s of physics after placing the objects
+SETTLE_STEPS = 150  # at least 0.3 s of physics after dropping the objects
+SETTLE_MAX_STEPS = 1500  # at most 3 s: objects are at rest well before (checked every SETTLE_STEPS)
+REST_SPEED = 0.005  # m/s (and rad/s x 0.1 m): an object slower than this is at rest
+DROP_HEIGHT = 0.01  # m between the table and the dropped object's lowest point
 MIN_OBJECT_DISTANCE = 0.09
 
 
@@ -178,18 +184,29 @@ class WidowXSortingEnv(MujocoEnv):
                 if all(np.linalg.norm(xy - p) >= MIN_OBJECT_DISTANCE for p in placed):
                     break
             placed.append(xy)
-            yaw = rng.uniform(-math.pi, math.pi)
-            z = 0.005 - self.index.obj_local_bottom[name]
-            self.index.set_object_pose(self.data, name, [xy[0], xy[1], z], wscene.yaw_quat(yaw))
+            if options.get("upright"):  # standing on the sole / base with a random yaw
+                quat = wscene.yaw_quat(rng.uniform(-math.pi, math.pi))
+            else:  # any orientation (the paper: "random quaternion")
+                quat = wscene.random_quat(rng)
+            z = DROP_HEIGHT - wscene.lowest_point(self.index, name, quat)
+            self.index.set_object_pose(self.data, name, [xy[0], xy[1], z], quat)
         home = HOME_POSE.copy()
         home[:3] += rng.uniform(-0.015, 0.015, 3)
         q = controller.ik(home)
         self.data.qpos[self.index.arm_qpos] = q
         self.data.qpos[self.index.finger_qpos] = [wm.FINGER_OPEN, -wm.FINGER_OPEN]
         self._set_targets(home, -1.0)
-        self.do_simulation(n_steps=SETTLE_STEPS)
+        self._settle()
         count, where = sorted_count(self.model, self.data, self.domain)
         return self._obs(), self._info(count, where)
+
+    def _settle(self) -> None:
+        """Let the dropped objects fall and come to rest (the robot holds its home pose), so an
+        episode's first observation shows a scene at rest."""
+        for _ in range(SETTLE_MAX_STEPS // SETTLE_STEPS):
+            self.do_simulation(n_steps=SETTLE_STEPS)
+            if max(self.index.object_speed(self.data, n) for n in self.domain.objects) < REST_SPEED:
+                return
 
     def set_domain(self, domain: wdom.Domain) -> None:
         """Apply an episode's objects and looks (textures, lights, camera) to the model."""

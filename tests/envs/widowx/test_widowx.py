@@ -89,6 +89,22 @@ def test_ik_matches_simulator():
         assert np.all(q >= lo - 1e-9) and np.all(q <= hi + 1e-9)
 
 
+# --- start state ---------------------------------------------------------------------------
+def test_objects_start_in_any_orientation_and_at_rest(env):
+    tilted = 0
+    for seed in range(6):
+        env.reset(seed=seed)
+        for name in env.domain.objects:
+            assert env.index.object_speed(env.data, name) < 0.005  # settled before the first observation
+            pos = wscene.object_center(env.model, env.data, name)
+            assert 0 < pos[2] < 0.08 and not any(wscene.in_bin(pos, b) for b in wm.BIN_CENTERS)
+            up = env.data.xmat[env.index.obj_body[name]].reshape(3, 3)[:, 2]  # the body's z axis in the world
+            tilted += up[2] < 0.9
+    assert tilted >= 4  # most lie on a side or upside down, not standing as modelled
+    env.reset(seed=0, options={"upright": True})
+    assert all(env.data.xmat[env.index.obj_body[n]].reshape(3, 3)[2, 2] > 0.95 for n in env.domain.objects)
+
+
 # --- grasping and bins -----------------------------------------------------------------
 @pytest.mark.parametrize("name", wm.POOL)
 def test_grasp_and_lift_each_object(env, name):
@@ -96,7 +112,7 @@ def test_grasp_and_lift_each_object(env, name):
                   toy=name if wm.CATEGORY[name] == "toy" else "duck")
     lifted = 0
     for seed in range(2):
-        env.reset(seed=seed, options={"domain": dom})
+        env.reset(seed=seed, options={"domain": dom, "upright": True})  # the grip itself, from a standing pose
         pol = scripted.ScriptedSorter(env, [name], [wm.CATEGORY[name]], np.random.default_rng(seed), noise=0.0)
         for _ in range(60):
             env.step(pol.act())
@@ -142,12 +158,15 @@ def test_object_on_table_does_not_count(env):
 
 
 # --- scripted policy ---------------------------------------------------------------------
-def test_scripted_sorting_success_band():
-    """Stated band (docs/datacards/widowx.md): with p_wrong = 0 the policy sorts >= 85% of objects."""
+def test_scripted_sorting_profile():
+    """The paper's profile (docs/datacards/widowx.md): segments solved often, the whole task well below half
+    (objects lie in any orientation); measured with p_wrong = 0 on 8 episodes."""
     gen = WidowXScriptedGenerator(mode="sorting", p_wrong=0.0)
     eps = [gen.episode(i, np.random.default_rng([7, i])) for i in range(8)]
     placed = [ok for e in eps for ok in e.meta["placed_as_intended"]]
-    assert np.mean(placed) >= 0.85
+    assert 0.25 <= np.mean(placed) <= 0.8
+    assert np.mean([e.meta["num_sorted"] == 2 for e in eps]) < 0.5
+    assert np.mean([e.meta["num_sorted"] > 0 for e in eps]) >= 0.5
     # stage 1 (first object) succeeds before stage 2 is attempted, and in time
     for e in eps:
         if e.meta["num_sorted"] == 2:
