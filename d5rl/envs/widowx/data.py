@@ -31,12 +31,14 @@ import numpy as np
 
 from d5rl.datasets.episode import Episode
 from d5rl.envs.widowx import model as wm
+from d5rl.envs.widowx import scene as wscene
 from d5rl.envs.widowx import domain as wdom
 from d5rl.envs.widowx import scripted
 from d5rl.envs.widowx.registration import MAX_EPISODE_STEPS
 from d5rl.envs.widowx.task import WidowXSortingEnv
 
 PICKPLACE_STEPS = 60
+LIFTED_Z = 0.06  # m: an object whose centre rises this high while carried counts as grasped
 
 
 class WidowXScriptedGenerator:
@@ -83,6 +85,7 @@ class WidowXScriptedGenerator:
         proprio[0], states[0] = env.proprio(), env.get_state()
         stage[0], current[0] = policy.stage, policy.current
         first_reward_step: dict[int, int] = {}
+        lifted = [False] * len(objects)  # did the object leave the table in the policy's grasp?
         done_step = None
         info: dict[str, Any] = {}
         for t in range(T):
@@ -90,6 +93,9 @@ class WidowXScriptedGenerator:
             _, rewards[t], _, _, info = env.step(actions[t])
             proprio[t + 1], states[t + 1] = env.proprio(), env.get_state()
             stage[t + 1], current[t + 1] = policy.stage, policy.current
+            if policy.stage_name in ("lift", "carry", "release") and policy.current < len(objects):
+                name = objects[policy.current]
+                lifted[policy.current] |= bool(wscene.object_center(env.model, env.data, name)[2] > LIFTED_Z)
             first_reward_step.setdefault(int(rewards[t]), t)
             if done_step is None and policy.stage_name == "done":
                 done_step = t
@@ -102,6 +108,7 @@ class WidowXScriptedGenerator:
             "wrong_bin": wrong,
             "final_bins": [final_bins[o] for o in objects],
             "placed_as_intended": [final_bins[o] == b for o, b in zip(objects, targets)],
+            "lifted": lifted,
             "num_sorted": int(info["num_sorted"]),
             "policy_done_step": done_step,
             "first_step_with_reward": {str(k): v for k, v in sorted(first_reward_step.items()) if k > 0},

@@ -41,6 +41,7 @@ def stats(metas: list[dict]) -> dict:
         correct = [m["final_bins"][s] == _category(m["objects"][s]) for m in metas]
         wrong_choice = [m["wrong_bin"][s] for m in metas]
         out[f"stage {s + 1}"] = {
+            "grasped (lifted off the table)": float(np.mean([m["lifted"][s] for m in metas])),
             "placed in the intended bin": float(np.mean(ok)),
             "ended in a bin": float(np.mean(in_a_bin)),
             "ended in its correct bin": float(np.mean(correct)),
@@ -70,12 +71,14 @@ def _category(name: str) -> str:
 
 
 def to_markdown(task_id: str, s: dict) -> str:
-    lines = [f"### {task_id} (first {s['episodes']} episodes)", "", "| stage | placed in intended bin | in a bin | "
-             "in its correct bin | wrong bin chosen |", "|---|---|---|---|---|"]
+    lines = [f"### {task_id} (first {s['episodes']} episodes)", "", "| stage | grasped | grasp failed | "
+             "placed in intended bin | in a bin | in its correct bin | wrong bin chosen |",
+             "|---|---|---|---|---|---|---|"]
     for k, v in s.items():
         if k.startswith("stage"):
-            lines.append(f"| {k} | {v['placed in the intended bin']:.1%} | {v['ended in a bin']:.1%} | "
-                         f"{v['ended in its correct bin']:.1%} | {v['wrong bin chosen']:.1%} |")
+            g = v["grasped (lifted off the table)"]
+            lines.append(f"| {k} | {g:.1%} | {1 - g:.1%} | {v['placed in the intended bin']:.1%} | "
+                         f"{v['ended in a bin']:.1%} | {v['ended in its correct bin']:.1%} | {v['wrong bin chosen']:.1%} |")
     f = s["final objects sorted"]
     lines += ["", f"- objects in their correct bin at the end: 0: {f[0]:.1%}, 1: {f[1]:.1%}, 2: {f[2]:.1%}; "
               f"mean normalized score {s['mean final score']:.3f}",
