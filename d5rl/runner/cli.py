@@ -133,13 +133,15 @@ def cmd_report(args) -> int:
 
 
 def add_bench_parser(subparsers) -> argparse.ArgumentParser:
+    from d5rl.agents import AGENTS
+
     q = subparsers.add_parser(
         "bench", help="train a grid of tasks × algorithms × seeds (resumable; local processes or Ray)",
         description="Run every (task, algorithm, seed) cell of a grid. Finished cells are skipped, so "
                     "rerunning the same command resumes a killed sweep; a failing cell is retried once.")
     q.add_argument("--tasks", nargs="+", required=True,
                    help="task ids, or prefixes standing for all their tasks (a1, kitchen-standard)")
-    q.add_argument("--algos", nargs="+", required=True, help="bc iql cql calql td3bc rlpd ddpm_bc idql")
+    q.add_argument("--algos", nargs="+", required=True, help=" ".join(AGENTS))
     q.add_argument("--seeds", nargs="+", default=["0", "1", "2"], help="seeds (list, or a range like 0-4)")
     q.add_argument("--offline-steps", type=int, default=500_000, help="offline gradient steps (paper: 500k)")
     q.add_argument("--online-steps", type=int, default=0,

@@ -75,17 +75,7 @@ class KitchenStandardGenerator:
         cols = np.array([SUBTASK_NAMES.index(s) for s in subtasks])
         env.reset(seed=int(rng.integers(2**31)))
         policy = Demonstrator(env, subtasks, rng)
-        states, proprio, actions, completed = [env.get_state()], [env.data.qpos[:9].astype(np.float32)], [], []
-        for _ in range(self.max_steps):
-            action = policy.act()
-            if policy.finished:
-                break
-            env.step(action)
-            actions.append(action)
-            states.append(env.get_state())
-            proprio.append(env.data.qpos[:9].astype(np.float32))
-            completed.append(env.completed())
-        arrays = episode_arrays(states, proprio, actions, completed, cols)
+        arrays = record_episode(env, policy, self.max_steps, cols)
         solved = arrays["infos/completed"][:, cols].any(axis=0)
         info = {
             "subtasks": list(subtasks),
@@ -94,6 +84,25 @@ class KitchenStandardGenerator:
             "style": dict(vars(policy.style)) if hasattr(policy.style, "__dict__") else {},
         }
         return Episode(arrays, {**(meta or {}), **info})
+
+
+def record_episode(env, policy, max_steps: int, cols, when_finished=None) -> dict[str, np.ndarray]:
+    """Step ``env`` with the demonstrator ``policy`` for at most ``max_steps`` and return the episode's
+    arrays (:func:`episode_arrays`). When the script is finished the episode ends, unless
+    ``when_finished(action)`` is given: it returns the action to keep stepping with."""
+    states, proprio, actions, completed = [env.get_state()], [env.data.qpos[:9].astype(np.float32)], [], []
+    for _ in range(max_steps):
+        action = policy.act()
+        if policy.finished:
+            if when_finished is None:
+                break
+            action = when_finished(action)
+        env.step(action)
+        actions.append(action)
+        states.append(env.get_state())
+        proprio.append(env.data.qpos[:9].astype(np.float32))
+        completed.append(env.completed())
+    return episode_arrays(states, proprio, actions, completed, cols)
 
 
 def episode_arrays(states, proprio, actions, completed, cols) -> dict[str, np.ndarray]:

@@ -24,7 +24,7 @@ from typing import Sequence
 import numpy as np
 
 from d5rl.datasets.episode import Episode
-from d5rl.envs.kitchen.data import episode_arrays
+from d5rl.envs.kitchen.data import record_episode
 from d5rl.envs.kitchen.subtasks import MIXED, PARTIAL, SUBTASK_NAMES
 
 MAX_STEPS = 500
@@ -96,19 +96,14 @@ class RandomizedKitchenGenerator:
         # an abandoned subtask is still approached for a while (a failed attempt), then dropped
         policy = Demonstrator(env, attempted, rng, style=op.style(rng))
         cols = np.array([SUBTASK_NAMES.index(s) for s in subtasks])
-        states, proprio, actions, completed = [env.get_state()], [env.data.qpos[:9].astype(np.float32)], [], []
         hold_noise = np.zeros(9)
-        for _ in range(self.max_steps):
-            action = policy.act()
-            if policy.finished:
-                hold_noise = 0.8 * hold_noise + 0.2 * rng.normal(0.0, policy.style.noise, 9)
-                action = np.clip(action + hold_noise, -1, 1).astype(np.float32)
-            env.step(action)
-            actions.append(action)
-            states.append(env.get_state())
-            proprio.append(env.data.qpos[:9].astype(np.float32))
-            completed.append(env.completed())
-        arrays = episode_arrays(states, proprio, actions, completed, cols)
+
+        def hold(action):  # after the script: hold still with the operator's slowly varying noise
+            nonlocal hold_noise
+            hold_noise = 0.8 * hold_noise + 0.2 * rng.normal(0.0, policy.style.noise, 9)
+            return np.clip(action + hold_noise, -1, 1).astype(np.float32)
+
+        arrays = record_episode(env, policy, self.max_steps, cols, when_finished=hold)
         solved_any = arrays["infos/completed"].any(axis=0)
         meta = {
             "domain": info0["domain"],
