@@ -138,42 +138,49 @@ def cmd_verify(args) -> int:
     return 1
 
 
+def _parse_size(text: str) -> tuple[int, int]:
+    """``WIDTHxHEIGHT`` -> ``(height, width)``."""
+    w, sep, h = text.lower().partition("x")
+    if not sep or not w.isdigit() or not h.isdigit() or not (8 <= int(w) <= 4096 and 8 <= int(h) <= 4096):
+        raise argparse.ArgumentTypeError(f"{text!r} is not a frame size; write WIDTHxHEIGHT, e.g. 320x240")
+    return int(h), int(w)
+
+
 def cmd_render(args) -> int:
-    import imageio.v2 as imageio
-    import numpy as np
     from tqdm.auto import tqdm
 
-    from d5rl.registry import make_env
+    from d5rl.registry import get_spec, make_env
+    from d5rl.video import replay_frames, rollout_frames, write_video
 
-    env = make_env(args.task, render_mode="rgb_array")
-    base = env.unwrapped
-    frames = []
+    spec = get_spec(args.task)
+    if args.steps is not None and args.steps < 1:
+        raise D5RLError(f"--steps must be at least 1, got {args.steps}", "leave it out to render the whole episode")
     if args.episode is not None:
         from d5rl.datasets.loading import load_dataset
 
-        ds = load_dataset(args.task, episodes=args.episode + 1, generate=False, progress=False)
+        if args.episode < 0:
+            raise D5RLError(f"--episode must be >= 0, got {args.episode}", "episodes are numbered from 0")
+        # camera tasks: states are enough to replay; no camera-frame cache is built for this
+        kwargs = {"render": False} if spec.dataset is not None and spec.dataset.derived else {}
+        ds = load_dataset(args.task, episodes=args.episode + 1, generate=False, progress=False, in_memory=False,
+                          **kwargs)
         ep = ds.episode(args.episode)
         if "states" not in ep.arrays:
             raise D5RLError(f"{args.task}'s dataset stores no simulator states to replay")
-        env.reset(seed=args.seed)
-        for state in tqdm(ep.arrays["states"][: args.steps + 1], unit="frame", desc="render"):
-            base.set_state(state)
-            frames.append(env.render())
+        states = ep.arrays["states"][: None if args.steps is None else args.steps + 1]
+        total, desc = len(states), f"render {args.task} episode {args.episode}"
     else:
-        rng = np.random.default_rng(args.seed)
-        env.reset(seed=args.seed)
-        env.action_space.seed(int(rng.integers(2**31)))
-        frames.append(env.render())
-        for _ in tqdm(range(args.steps), unit="frame", desc="render"):
-            _, _, term, trunc, _ = env.step(env.action_space.sample())
-            frames.append(env.render())
-            if term or trunc:
-                break
-    env.close()
-    out = Path(args.out)
-    out.parent.mkdir(parents=True, exist_ok=True)
-    imageio.mimsave(out, frames, fps=base.metadata.get("render_fps", 20), macro_block_size=1)
-    print(f"wrote {len(frames)} frames to {out}")
+        states, desc = None, f"render {args.task} (random actions)"
+        total = (spec.max_episode_steps if args.steps is None else args.steps) + 1
+    env = make_env(args.task, render_mode="rgb_array")
+    try:
+        frames = (replay_frames(env, states, args.size, args.quality) if states is not None
+                  else rollout_frames(env, total - 1, args.seed, args.size, args.quality))
+        bar = tqdm(frames, total=total, unit="frame", desc=desc, disable=args.quiet)
+        n = write_video(args.out, bar, fps=env.unwrapped.metadata.get("render_fps", 20))
+    finally:
+        env.close()
+    print(f"wrote {n} frames to {args.out}")
     return 0
 
 
@@ -228,9 +235,14 @@ def build_parser() -> argparse.ArgumentParser:
     q = sub.add_parser("render", help="write a video of a random rollout or a dataset episode")
     q.add_argument("task")
     q.add_argument("--out", default="video.mp4")
-    q.add_argument("--steps", type=int, default=200)
-    q.add_argument("--seed", type=int, default=0)
+    q.add_argument("--steps", type=int, help="render at most this many steps (default: the whole episode)")
+    q.add_argument("--seed", type=int, default=0, help="seed of the random rollout")
     q.add_argument("--episode", type=int, help="replay this dataset episode from its stored states")
+    q.add_argument("--size", type=_parse_size, metavar="WxH", help="frame size (default: the task's, 320x240 for A1)")
+    q.add_argument("--quality", choices=("fast", "full"), default="fast",
+                   help="fast (default): no shadows, reflections or multisampling, several times faster on a CPU; "
+                        "full: exactly as env.render()")
+    q.add_argument("--quiet", action="store_true", help="no progress bar")
     q.set_defaults(func=cmd_render)
 
     q = sub.add_parser("export-minari", help="export a dataset in the Minari format")
