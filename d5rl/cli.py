@@ -15,45 +15,14 @@ def _table(rows: list[list[str]], header: list[str]) -> str:
     return "\n".join([line(header), line(["-" * w for w in widths]), *map(line, rows)])
 
 
-def _human_bytes(n: float) -> str:
-    for unit in ("B", "KiB", "MiB", "GiB", "TiB"):
-        if n < 1024 or unit == "TiB":
-            return f"{n:.1f} {unit}" if unit != "B" else f"{int(n)} B"
-        n /= 1024
-    return f"{n:.1f} TiB"
-
-
-def _dataset_status(spec) -> tuple[str, dict | None]:
-    from d5rl.datasets import format as fmt
-    from d5rl.datasets import generation
-
-    if spec.dataset is None:
-        return "-", None
-    root = generation.dataset_root(spec.dataset)
-    path = root / fmt.MANIFEST
-    if path.exists():
-        try:
-            m = fmt.read_manifest(path)
-        except D5RLError:
-            return "unreadable manifest (generate --force)", None
-        try:
-            generation.check_current(m, spec.dataset, spec.dataset.default_seed, root)
-        except D5RLError:
-            return "stale (generate --force)", m
-        full = m["num_episodes"] >= spec.dataset.num_episodes
-        return ("ready" if full else f"partial ({m['num_episodes']} ep)"), m
-    if (root / "shards").exists():
-        return "incomplete (resume with generate)", None
-    return "not generated", None
-
-
 def cmd_list(args) -> int:
+    from d5rl.datasets.status import dataset_status
     from d5rl.registry import get_spec, list_tasks
 
     rows = []
     for tid in list_tasks(args.family):
         s = get_spec(tid)
-        status, _ = _dataset_status(s)
+        status, _ = dataset_status(s)
         ds = s.dataset
         rows.append([tid, s.max_episode_steps, ds.name if ds else "-", ds.num_episodes if ds else "-", status])
     print(_table(rows, ["task", "horizon", "dataset", "episodes", "status"]))
@@ -64,6 +33,7 @@ def cmd_info(args) -> int:
     import numpy as np
 
     from d5rl.datasets.generation import dataset_root
+    from d5rl.datasets.status import dataset_status, disk_bytes, human_bytes
     from d5rl.registry import get_spec, make_env
 
     s = get_spec(args.task)
@@ -81,16 +51,16 @@ def cmd_info(args) -> int:
     if s.dataset is None:
         return 0
     d = s.dataset
-    status, manifest = _dataset_status(s)
+    status, manifest = dataset_status(s)
     print(f"  dataset:      {d.name} v{d.version}, {d.num_episodes} episodes, generator {d.generator}")
     if d.description:
         print(f"                {d.description}")
     root = dataset_root(d)
     print(f"  location:     {root}  [{status}]")
     if manifest is not None:
-        size = sum(p.stat().st_size for p in root.rglob("*") if p.is_file())
+        size = disk_bytes(root)
         print(f"  on disk:      {manifest['num_episodes']} episodes, {manifest['num_transitions']} transitions, "
-              f"{_human_bytes(size)}")
+              f"{human_bytes(size)}")
         if args.stats:
             from d5rl.datasets.loading import load_dataset
 
@@ -277,6 +247,7 @@ _PLUGINS = [
     ("d5rl.training.cli", "add_eval_parser"),
     ("d5rl.runner.cli", "add_bench_parser"),
     ("d5rl.runner.cli", "add_report_parser"),
+    ("d5rl.browse.server", "add_browse_parser"),
     ("d5rl.envs.kitchen.d4rl_import", "add_import_d4rl_kitchen_parser"),
     ("d5rl.envs.a1.calibrate", "add_calibrate_parser"),
 ]

@@ -205,6 +205,22 @@ def aggregate_csv(rows: list[dict], table_name: str) -> list[list]:
              repr(r["iqm_hi"]), repr(r["mean"])] for r in rows]
 
 
+def mean_curves(cells: list[CellResult]) -> dict[str, tuple[np.ndarray, np.ndarray, np.ndarray]]:
+    """Per algorithm (paper order), over the cells' seeds: ``(steps, mean score, std score)`` at every
+    evaluated step.  ``cells`` should be of one task."""
+    out = {}
+    for a in _method_order({c.algo for c in cells}):
+        per_step: dict[int, list[float]] = {}
+        for c in cells:
+            if c.algo != a:
+                continue
+            for e in c.evals:
+                per_step.setdefault(e["step"], []).append(e["score"])
+        steps = np.array(sorted(per_step))
+        out[a] = (steps, np.array([np.mean(per_step[s]) for s in steps]), np.array([np.std(per_step[s]) for s in steps]))
+    return out
+
+
 def plot_curves(results: list[CellResult], out_dir: Path) -> list[Path]:
     """One PNG per task: normalized score against gradient steps, mean ± std over seeds per method."""
     try:
@@ -222,17 +238,7 @@ def plot_curves(results: list[CellResult], out_dir: Path) -> list[Path]:
             by_task.setdefault(r.task, []).append(r)
     for task, cells in sorted(by_task.items()):
         fig, ax = plt.subplots(figsize=(6, 4), dpi=100)
-        for a in _method_order({c.algo for c in cells}):
-            # (phase, step) keeps an offline and an online evaluation at the same step apart
-            per_step: dict[int, list[float]] = {}
-            for c in cells:
-                if c.algo != a:
-                    continue
-                for e in c.evals:
-                    per_step.setdefault(e["step"], []).append(e["score"])
-            steps = np.array(sorted(per_step))
-            mean = np.array([np.mean(per_step[s]) for s in steps])
-            std = np.array([np.std(per_step[s]) for s in steps])
+        for a, (steps, mean, std) in mean_curves(cells).items():
             (line,) = ax.plot(steps, mean, label=method_name(a), marker="." if len(steps) < 30 else None)
             ax.fill_between(steps, mean - std, mean + std, alpha=0.2, color=line.get_color())
         offline = {c.offline_steps for c in cells if c.online_steps > 0}

@@ -1,0 +1,54 @@
+"""What the browse page knows about each family beyond the generic arrays: column names of ``infos/*``
+arrays, per-episode scores that are not a function of the return, and extra overview plots built from
+the families' own data-card statistics."""
+
+from __future__ import annotations
+
+import numpy as np
+
+
+def column_labels(spec, key: str, ncols: int) -> list[str] | None:
+    """Names of the columns of ``infos/<key>`` (kitchen: the subtasks of ``infos/completed``)."""
+    if spec.family == "kitchen" and key == "infos/completed":
+        from d5rl.envs.kitchen.subtasks import SUBTASK_NAMES
+
+        return list(SUBTASK_NAMES) if len(SUBTASK_NAMES) == ncols else None
+    return None
+
+
+def value_labels(spec, key: str) -> list[str] | None:
+    """Names of the integer values of a 1-D ``infos/<key>`` (WidowX: the scripted policy's stages)."""
+    if spec.family == "wx" and key == "infos/stage":
+        from d5rl.envs.widowx.scripted import STAGES
+
+        return list(STAGES)
+    return None
+
+
+def episode_scores(spec, ds, returns: np.ndarray) -> np.ndarray | None:
+    """Normalized score of every dataset episode, or None where the data does not define one."""
+    if spec.score_from == "return" and spec.score is not None:
+        from d5rl.registry import normalize_score
+
+        return np.asarray(normalize_score(spec, returns), np.float64)
+    if spec.family == "wx" and all("num_sorted" in m for m in ds.episode_meta):
+        return np.array([m["num_sorted"] / 2 for m in ds.episode_meta], np.float64)  # info["score"] at the end
+    return None
+
+
+def overview_extras(spec, ds) -> list[dict]:
+    """Family plots for the dataset overview (bar charts: ``{title, x, y, xlabel, ylabel}``)."""
+    if spec.family != "wx" or not ds.episode_meta or "placed_as_intended" not in ds.episode_meta[0]:
+        return []
+    from d5rl.envs.widowx.datacard_stats import stats
+
+    s = stats(list(ds.episode_meta))
+    stages = [k for k in s if k.startswith("stage")]
+    out = []
+    for measure in ("grasped (lifted off the table)", "placed in the intended bin", "ended in its correct bin"):
+        out.append({"title": f"Success profile: {measure}", "x": stages, "y": [s[k][measure] for k in stages],
+                    "xlabel": "stage of the script", "ylabel": "share of episodes"})
+    final = s["final objects sorted"]
+    out.append({"title": "Objects in their correct bin at the end", "x": [str(k) for k in final],
+                "y": [final[k] for k in final], "xlabel": "objects sorted", "ylabel": "share of episodes"})
+    return out
