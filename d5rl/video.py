@@ -75,15 +75,19 @@ def write_video(path: str | Path, frames: Iterable[np.ndarray], fps: float) -> i
     path = Path(path)
     path.parent.mkdir(parents=True, exist_ok=True)
     tmp = path.with_name(f".{path.stem}.tmp{path.suffix}")
-    n = 0
+    n, complete = 0, False
+    writer = imageio.get_writer(tmp, fps=fps, macro_block_size=1)
     try:
-        with imageio.get_writer(tmp, fps=fps, macro_block_size=1) as writer:
-            for frame in frames:
-                writer.append_data(frame)
-                n += 1
-        tmp.replace(path)
+        for frame in frames:
+            writer.append_data(frame)
+            n += 1
+        complete = True
     finally:
-        tmp.unlink(missing_ok=True)
+        writer.close()  # waits for ffmpeg to finish the file
+        if complete:
+            tmp.replace(path)
+        else:
+            tmp.unlink(missing_ok=True)
     return n
 
 

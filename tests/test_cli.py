@@ -70,3 +70,41 @@ def test_list_marks_data_from_older_generator_code_as_stale(capsys, monkeypatch)
     assert main(["list"]) == 0
     line = next(ln for ln in capsys.readouterr().out.splitlines() if ln.startswith(spec.id))
     assert "stale (generate --force)" in line
+
+
+def test_render_writes_the_whole_episode_by_default(tmp_path, capsys):
+    import imageio.v3 as iio
+
+    out = tmp_path / "toy.mp4"
+    assert main(["render", "toy-reach-v0", "--out", str(out), "--quiet"]) == 0
+    assert "wrote 26 frames" in capsys.readouterr().out  # the first observation + all 25 steps
+    assert len(list(iio.imiter(out))) == 26
+    assert main(["render", "toy-reach-v0", "--out", str(out), "--steps", "5", "--quiet"]) == 0
+    assert "wrote 6 frames" in capsys.readouterr().out
+    assert not list(tmp_path.glob(".*tmp*"))
+
+
+def test_render_replays_every_stored_state_of_the_episode(tmp_path, capsys):
+    import imageio.v3 as iio
+
+    from tests.browse import toy
+
+    assert main(["generate", toy.ENV_TASK, "--workers", "1"]) == 0
+    out = tmp_path / "ep.mp4"
+    assert main(["render", toy.ENV_TASK, "--episode", "2", "--out", str(out), "--quiet"]) == 0
+    assert "wrote 9 frames" in capsys.readouterr().out  # episode 2: 8 transitions, 9 states
+    assert len(list(iio.imiter(out))) == 9
+
+
+def test_render_and_browse_bad_input_is_one_line(capsys, tmp_path):
+    for argv, says in ((["render", "toy-reach-v0", "--size", "big"], "WIDTHxHEIGHT"),
+                       (["render", "toy-reach-v0", "--steps", "0"], "--steps must be at least 1"),
+                       (["render", "toy-reach-v0", "--episode", "-1"], "--episode must be >= 0"),
+                       (["browse", str(tmp_path / "missing-run")], "does not exist")):
+        try:
+            code = main(argv)
+        except SystemExit as e:  # argparse's own errors
+            code = e.code
+        assert code == 2
+        err = capsys.readouterr().err
+        assert says in err and "Traceback" not in err

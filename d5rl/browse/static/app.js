@@ -149,7 +149,7 @@ async function episodeView(task, index) {
       ? { x, y: s.y.map((v) => (v == null ? null : j + 0.8 * v)), name: s.name, mode: "lines", line: { shape: "hv" } }
       : { x, y: s.y, name: s.name, mode: "lines", yaxis: s.axis === "y2" ? "y2" : "y" });
     const layout = { title: { text: p.title + (p.align === "transition" ? " (per transition t: frame t → t+1)" : " (per frame)"), font: { size: 12 } },
-      margin: { l: 50, r: 50, t: 28, b: 28 }, xaxis: { range: [0, T] }, legend: { font: { size: 10 } }, showlegend: p.series.length > 1 };
+      margin: { l: p.kind === "flags" || p.value_labels ? 110 : 50, r: 60, t: 28, b: 28 }, xaxis: { range: [0, T] }, legend: { font: { size: 10 } }, showlegend: p.series.length > 1 };
     if (p.series.some((s) => s.axis === "y2")) layout.yaxis2 = { overlaying: "y", side: "right", title: { text: "return" } };
     if (p.kind === "flags") layout.yaxis = { tickvals: p.series.map((_, j) => j), ticktext: p.series.map((s) => s.name) };
     if (p.value_labels) layout.yaxis = { tickvals: p.value_labels.map((_, j) => j), ticktext: p.value_labels };
