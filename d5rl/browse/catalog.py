@@ -103,15 +103,15 @@ def _histogram(values, title: str, xlabel: str, bins: int = BINS) -> dict:
     v = np.asarray(values, np.float64)
     v = v[np.isfinite(v)]
     counts, edges = np.histogram(v, bins=bins if v.size and np.ptp(v) > 0 else 1)
-    return {"title": title, "x": json_floats((edges[:-1] + edges[1:]) / 2), "y": counts.tolist(), "width": json_floats(np.diff(edges)),
-            "xlabel": xlabel, "ylabel": "count"}
+    return {"title": title, "x": json_floats((edges[:-1] + edges[1:]) / 2), "y": counts.tolist(),
+            "width": json_floats(np.diff(edges)), "xlabel": xlabel, "ylabel": "count"}
 
 
 def episodes_table(task_id: str, ds) -> dict:
     """Every episode: index, length, return, normalized score (when the data defines one)."""
     spec = get_spec(task_id)
     returns = _returns(ds)
-    scores = families.episode_scores(spec, ds, returns)
+    scores = families.episode_scores(spec, ds.episode_meta, returns)
     return {"task": spec.id, "lengths": ds.episode_lengths.tolist(), "returns": json_floats(returns),
             "scores": None if scores is None else json_floats(scores)}
 
@@ -123,7 +123,7 @@ def overview(task_id: str, ds) -> dict:
     returns = _returns(ds)
     plots = [_histogram(returns, "Episode return", "return"),
              _histogram(ds.episode_lengths, "Episode length", "steps")]
-    scores = families.episode_scores(spec, ds, returns)
+    scores = families.episode_scores(spec, ds.episode_meta, returns)
     if scores is not None:
         plots.append(_histogram(scores, "Normalized score of the dataset's episodes", "normalized score"))
     for key in sorted(k for k in ds.arrays if k.startswith("infos/")):
@@ -132,12 +132,14 @@ def overview(task_id: str, ds) -> dict:
         if arr.dtype == bool and arr.ndim == 2 and ds.aligns[key] == "transition":
             done = np.logical_or.reduceat(np.asarray(arr), ds.episode_starts, axis=0)  # (E, k): ever true
             per_ep = done.sum(axis=1)
-            plots.append({"title": f"{name}: columns true at some step, per episode", "x": list(range(arr.shape[1] + 1)),
+            plots.append({"title": f"{name}: columns true at some step, per episode",
+                          "x": list(range(arr.shape[1] + 1)),
                           "y": np.bincount(per_ep, minlength=arr.shape[1] + 1).tolist(),
                           "xlabel": "count", "ylabel": "episodes"})
             labels = families.column_labels(spec, key, arr.shape[1]) or [str(j) for j in range(arr.shape[1])]
             plots.append({"title": f"{name}: share of episodes where each column is true at some step",
-                          "x": labels, "y": json_floats(done.mean(axis=0)), "xlabel": "", "ylabel": "share of episodes"})
+                          "x": labels, "y": json_floats(done.mean(axis=0)), "xlabel": "",
+                          "ylabel": "share of episodes"})
         elif arr.ndim == 1 and arr.dtype.kind == "f" and "speed" in name:
             plots.append(_histogram(np.asarray(arr), f"{name} (every step)", name))
     plots += families.overview_extras(spec, ds)
@@ -175,8 +177,7 @@ def episode_series(task_id: str, ds, index: int) -> dict:
     actions = np.asarray(a["actions"], np.float64).reshape(len(rewards), -1)
     panels.append({"title": "actions", "kind": "lines", "align": "transition",
                    "series": [{"name": f"a[{j}]", "y": json_floats(actions[:, j])} for j in range(actions.shape[1])]})
-    returns = _returns(ds)
-    scores = families.episode_scores(spec, ds, returns)
+    scores = families.episode_scores(spec, [ep.meta], np.array([rewards.sum()]))
     return {"task": spec.id, "index": index, "episodes": ds.num_episodes, "length": len(rewards),
-            "return": float(rewards.sum()), "score": None if scores is None else float(scores[index]),
+            "return": float(rewards.sum()), "score": None if scores is None else float(scores[0]),
             "terminal": bool(np.asarray(a["terminals"]).any()), "meta": ep.meta, "panels": panels}

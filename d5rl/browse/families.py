@@ -25,14 +25,15 @@ def value_labels(spec, key: str) -> list[str] | None:
     return None
 
 
-def episode_scores(spec, ds, returns: np.ndarray) -> np.ndarray | None:
-    """Normalized score of every dataset episode, or None where the data does not define one."""
+def episode_scores(spec, metas: list[dict], returns: np.ndarray) -> np.ndarray | None:
+    """Normalized score of dataset episodes (their metas and returns), or None where the data does not
+    define one."""
     if spec.score_from == "return" and spec.score is not None:
         from d5rl.registry import normalize_score
 
         return np.asarray(normalize_score(spec, returns), np.float64)
-    if spec.family == "wx" and all("num_sorted" in m for m in ds.episode_meta):
-        return np.array([m["num_sorted"] / 2 for m in ds.episode_meta], np.float64)  # info["score"] at the end
+    if spec.family == "wx" and all("num_sorted" in m for m in metas):
+        return np.array([m["num_sorted"] / 2 for m in metas], np.float64)  # info["score"] at the end
     return None
 
 

@@ -1,5 +1,5 @@
-"""An episode's camera frames for the browse page, as one image strip per camera (JPEG; PNG for tiny frames) (a grid of frames the
-page scrolls through: one request per camera, instant scrubbing).
+"""An episode's camera frames for the browse page, as one image strip per camera (JPEG; PNG for tiny
+frames): a grid of frames the page scrolls through, one request per camera, instant scrubbing.
 
 Where frames come from, first that applies:
 

@@ -162,7 +162,8 @@ def serve(host: str, port: int, run_dirs: list[Path]) -> None:
         import uvicorn
     except ModuleNotFoundError:
         raise D5RLError("`d5rl browse` needs the browse extra (starlette, uvicorn, plotly)",
-                        "pip install 'd5rl[browse]' (from a checkout: bash -c 'source scripts/install.sh browse')") from None
+                        "pip install 'd5rl[browse]' (from a checkout: "
+                        "bash -c 'source scripts/install.sh train,browse')") from None
     for r in run_dirs:
         if not Path(r).is_dir():
             raise D5RLError(f"run directory {r} does not exist", "pass the --out directory of `d5rl bench`")

@@ -217,7 +217,8 @@ def mean_curves(cells: list[CellResult]) -> dict[str, tuple[np.ndarray, np.ndarr
             for e in c.evals:
                 per_step.setdefault(e["step"], []).append(e["score"])
         steps = np.array(sorted(per_step))
-        out[a] = (steps, np.array([np.mean(per_step[s]) for s in steps]), np.array([np.std(per_step[s]) for s in steps]))
+        out[a] = (steps, np.array([np.mean(per_step[s]) for s in steps]),
+                  np.array([np.std(per_step[s]) for s in steps]))
     return out
 
 
