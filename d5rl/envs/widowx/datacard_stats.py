@@ -1,10 +1,13 @@
 """Success statistics by stage of the WidowX scripted datasets (for docs/datacards/widowx.md).
 
     python -m d5rl.envs.widowx.datacard_stats --episodes 200 [--task wx-sorting-v0]
+    python -m d5rl.envs.widowx.datacard_stats --frames docs/img/widowx-first-frames.png
 
 Computes the statistics from the first N episodes of each dataset exactly as
 ``d5rl generate`` makes them (same generator, same per-episode seeds), without
 writing anything; with ``--from-disk`` it reads the generated datasets instead.
+``--frames PNG`` writes the first camera frame of the first 8 ``wx-sorting`` episodes
+as a 4 x 2 grid instead (the data card's picture of the scene and its variation).
 """
 
 from __future__ import annotations
@@ -121,12 +124,32 @@ def to_markdown(task_id: str, s: dict) -> str:
     return "\n".join(lines)
 
 
+def first_frames(n: int = 8, size: int = 128) -> np.ndarray:
+    """uint8 (2 * size, n / 2 * size, 3): the first side-camera frame of episodes 0..n-1 of wx-sorting."""
+    from d5rl.envs.widowx.data import render_states
+
+    spec = get_spec(TASKS[0])
+    gen = make_generator(spec)
+    frames = []
+    for i in range(n):
+        ep = gen.episode(i, episode_rng(spec.dataset.default_seed, i))
+        frames.append(render_states(ep.arrays["states"][:1], ep.meta, size=size)[0])
+    rows = [np.concatenate(frames[k: k + n // 2], axis=1) for k in (0, n // 2)]
+    return np.concatenate(rows, axis=0)
+
+
 def main(argv=None) -> None:
     p = argparse.ArgumentParser(description=__doc__, formatter_class=argparse.RawDescriptionHelpFormatter)
     p.add_argument("--episodes", type=int, default=200)
     p.add_argument("--from-disk", action="store_true", help="read the generated datasets instead of regenerating")
     p.add_argument("--task", choices=TASKS, action="append", help="only this task's dataset (repeatable)")
+    p.add_argument("--frames", metavar="PNG", help="write the first frames of 8 wx-sorting episodes to PNG and exit")
     args = p.parse_args(argv)
+    if args.frames:
+        import imageio.v3 as iio
+
+        iio.imwrite(args.frames, first_frames(), optimize=True)
+        return
     for task in args.task or TASKS:
         print(to_markdown(task, stats(episode_metas(task, args.episodes, args.from_disk))))
         print()
