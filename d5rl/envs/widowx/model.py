@@ -85,7 +85,7 @@ CATEGORY = {**{s: "shoe" for s in SHOES}, **{t: "toy" for t in TOYS}}
 # whichever side it rests on, it can be grasped across its narrowest horizontal extent.
 TOY_ASSETS = {
     "duck": dict(folder="duck", scale=0.45, density=500.0),  # 42 x 31 x 44 mm
-    "train": dict(folder="train", scale=0.5, density=500.0),  # 49 x 30 x 42 mm
+    "train": dict(folder="train", scale=0.5, density=500.0),  # 48 x 30 x 42 mm
 }
 OBJECT_DENSITY_SHOE = 250.0  # foam/rubber shoe models
 
