@@ -3,9 +3,19 @@
 Two datasets of 2,000 episodes each (as in the paper):
 
 ``wx-sorting`` (``mode="sorting"``)
-    The scripted policy (:mod:`d5rl.envs.widowx.scripted`) picks and places both
-    objects in succession (random order); each object goes to the wrong bin with
-    probability 0.3.  Episodes run the task's full 120 steps.
+    The scripted policy (:mod:`d5rl.envs.widowx.scripted`) handles the objects in
+    random order, each going to the wrong bin with probability 0.3 (the paper), under
+    one of three plans drawn per episode so that, as in the paper, the data are "mostly
+    unsuccessful at solving the full task but consistently solve the individual
+    segments of the task in separate episodes":
+
+    - ``both`` (probability ``1 - p_one - p_miss``): picks and places both objects in
+      succession;
+    - ``one`` (``p_one``): picks and places the first object only, then returns home;
+    - ``miss`` (``p_miss``): both objects, but the grasp of one of them (either, at
+      random) is botched: the gripper closes above it and carries nothing.
+
+    Episodes run the task's full 120 steps.
 ``wx-pickplace`` (``mode="pickplace"``)
     The policy picks one of the two objects (chosen at random) and places it,
     in its correct bin with probability 0.7; 60-step episodes.
@@ -44,15 +54,22 @@ LIFTED_Z = 0.06  # m: an object whose centre rises this high while carried count
 class WidowXScriptedGenerator:
     """Episode generator for both WidowX datasets (see the module docstring)."""
 
-    version = "wx-scripted-2"  # 2: objects dropped in random orientations and settled; grasps across the narrow side seen from above
+    # 2: objects dropped in random orientations and settled; grasps across the narrow side seen from above.
+    # 3: tabletop room scene and its variation; objects scaled to be graspable on any side; sorting plans.
+    version = "wx-scripted-3"
 
-    def __init__(self, task_id: str = "", mode: str = "sorting", p_wrong: float = 0.3,
-                 episode_steps: int | None = None, noise: float = 0.15):
+    def __init__(self, task_id: str = "", mode: str = "sorting", p_wrong: float = 0.3, p_one: float = 0.0,
+                 p_miss: float = 0.0, episode_steps: int | None = None, noise: float = 0.15):
         if mode not in ("sorting", "pickplace"):
             raise ValueError(f"mode must be 'sorting' or 'pickplace', got {mode!r}")
+        if not (0 <= p_one and 0 <= p_miss and p_one + p_miss <= 1) or (mode == "pickplace" and p_one + p_miss):
+            raise ValueError(f"p_one={p_one}, p_miss={p_miss}: need p_one, p_miss >= 0 with p_one + p_miss <= 1, "
+                             "and both 0 for mode='pickplace'")
         self.task_id = task_id
         self.mode = mode
         self.p_wrong = float(p_wrong)
+        self.p_one = float(p_one)
+        self.p_miss = float(p_miss)
         self.noise = float(noise)
         default = MAX_EPISODE_STEPS if mode == "sorting" else PICKPLACE_STEPS
         self.episode_steps = int(episode_steps or default)
@@ -69,11 +86,18 @@ class WidowXScriptedGenerator:
         env.reset(seed=int(rng.integers(2**31 - 1)))
         objects = list(env.domain.objects)
         rng.shuffle(objects)
-        if self.mode == "pickplace":
+        plan = "pickplace"
+        if self.mode == "sorting":
+            u = rng.random()
+            plan = "one" if u < self.p_one else "miss" if u < self.p_one + self.p_miss else "both"
+        if plan in ("pickplace", "one"):
             objects = objects[:1]
+        missed = [False] * len(objects)
+        if plan == "miss":
+            missed[int(rng.integers(len(objects)))] = True
         wrong = [bool(rng.random() < self.p_wrong) for _ in objects]
         targets = [_other(wm.CATEGORY[o]) if w else wm.CATEGORY[o] for o, w in zip(objects, wrong)]
-        policy = scripted.ScriptedSorter(env, objects, targets, rng, noise=self.noise)
+        policy = scripted.ScriptedSorter(env, objects, targets, rng, noise=self.noise, miss=missed)
 
         T = self.episode_steps
         proprio = np.empty((T + 1, 8), np.float32)
@@ -103,10 +127,13 @@ class WidowXScriptedGenerator:
         meta = {
             "domain": env.domain.to_json(),
             "mode": self.mode,
-            "objects": objects,  # in the order the policy handles them
+            "plan": plan,  # sorting: "both", "one" or "miss"; "pickplace" for the pickplace data
+            "objects": objects,  # in the order the policy handles them (the ones it attempts)
+            "missed_grasp": missed,  # the grasp of this object was botched on purpose
             "target_bins": targets,
             "wrong_bin": wrong,
             "final_bins": [final_bins[o] for o in objects],
+            "end_bins": {"shoe": info["shoe_bin"], "toy": info["toy_bin"]},  # where the shoe / toy lie at the end
             "placed_as_intended": [final_bins[o] == b for o, b in zip(objects, targets)],
             "lifted": lifted,
             "num_sorted": int(info["num_sorted"]),

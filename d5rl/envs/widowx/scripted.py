@@ -5,9 +5,11 @@ bin positions) and walks through stages for each object it handles::
 
     approach -> descend -> grasp -> lift -> carry -> release -> (next object | retreat)
 
-Each object goes to its correct bin with probability ``1 - p_wrong`` and to the
-other bin otherwise (a "misclassified" object).  Gaussian noise is added to the
-movement part of every action, so grasps sometimes slip or miss.
+Each object goes to the bin it is given (the generator picks the wrong one with
+probability ``p_wrong``: a "misclassified" object).  An object marked ``miss`` gets a
+botched grasp: the gripper closes :data:`MISS_HEIGHT` above the grasp height, on
+nothing, and the script carries on as if it held the object.  Gaussian noise is added
+to the movement part of every action, so grasps sometimes slip or miss on their own.
 """
 
 from __future__ import annotations
@@ -24,6 +26,7 @@ HOVER_Z = 0.14
 GRASP_Z = 0.026  # tip height when closing (finger tips ~1 cm above the table)
 CARRY_Z = 0.15
 RELEASE_Z = 0.12
+MISS_HEIGHT = 0.05  # a botched grasp closes this far above the grasp height
 GRASP_STEPS = 4
 DESCEND_TIMEOUT = 12  # steps; a blocked descent closes the gripper where it is
 RELEASE_STEPS = 3
@@ -32,13 +35,16 @@ RELEASE_STEPS = 3
 class ScriptedSorter:
     """Picks ``objects`` in order and drops each into its chosen bin.
 
-    ``targets[i]`` is the bin ("shoe" / "toy") object ``i`` is carried to.
+    ``targets[i]`` is the bin ("shoe" / "toy") object ``i`` is carried to; ``miss[i]``
+    botches its grasp (default: none).
     """
 
-    def __init__(self, env, objects: list[str], targets: list[str], rng: np.random.Generator, noise: float = 0.15):
+    def __init__(self, env, objects: list[str], targets: list[str], rng: np.random.Generator, noise: float = 0.15,
+                 miss: list[bool] | None = None):
         self.env = env
         self.objects = list(objects)
         self.targets = list(targets)
+        self.miss = list(miss) if miss is not None else [False] * len(self.objects)
         self.rng = rng
         self.noise = float(noise)
         self.current = 0
@@ -98,8 +104,9 @@ class ScriptedSorter:
                 self.stage += 1
                 self.counter = 0
             return self._move(target, yaw, -1.0)
+        grasp_z = GRASP_Z + (MISS_HEIGHT if self.miss[self.current] else 0.0)
         if st == "descend":
-            target = [self.grasp_xy[0], self.grasp_xy[1], GRASP_Z]
+            target = [self.grasp_xy[0], self.grasp_xy[1], grasp_z]
             self.counter += 1
             if self._arrived(target, 0.012) or self.counter > DESCEND_TIMEOUT:
                 self.stage += 1
@@ -109,7 +116,7 @@ class ScriptedSorter:
             self.counter += 1
             if self.counter >= GRASP_STEPS:
                 self.stage += 1
-            target = [self.grasp_xy[0], self.grasp_xy[1], GRASP_Z]
+            target = [self.grasp_xy[0], self.grasp_xy[1], grasp_z]
             a = self._move(target, self.grasp_yaw, 1.0)
             a[:4] = 0.0
             return a

