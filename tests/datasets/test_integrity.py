@@ -111,11 +111,13 @@ def test_generate_repairs_a_deleted_shard_as_verify_says(tmp_path, capsys):
 
 # --- concurrency ------------------------------------------------------------------------------------------
 def test_two_generators_of_one_dataset_both_succeed(tmp_path, monkeypatch):
-    spec = register_toy("twogen", num_episodes=16, delay=0.3)
+    # the first generator runs ~6 s (32 episodes x 0.4 s on 2 workers), so the second one, started once
+    # the first has written a shard, finds the lock held even on a loaded machine
+    spec = register_toy("twogen", num_episodes=32, delay=0.4)
     root = dataset_root(spec.dataset)
-    a = toy_cli("twogen", 16, 0.3, "generate", "test-twogen-v0", "--workers", "2")
+    a = toy_cli("twogen", 32, 0.4, "generate", "test-twogen-v0", "--workers", "2")
     assert _wait_for(lambda: len(list((root / "shards").glob("shard-*"))) >= 1)
-    b = toy_cli("twogen", 16, 0.3, "generate", "test-twogen-v0", "--workers", "2")
+    b = toy_cli("twogen", 32, 0.4, "generate", "test-twogen-v0", "--workers", "2")
     out_a, out_b = a.communicate(timeout=120), b.communicate(timeout=120)
     assert a.returncode == 0, out_a[1][-2000:]
     assert b.returncode == 0, out_b[1][-2000:]
