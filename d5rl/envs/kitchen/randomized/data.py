@@ -69,7 +69,9 @@ class RandomizedKitchenGenerator:
     # 2: microwave pose noise; 3: integral action, wrist homing; 4: unwind; 5: straight reaches;
     # 6: joint-space transits, surface textures, microwave handles per model, wider microwave and kettle
     #    poses, kettle yaw (the domain draws more numbers, so every episode changes)
-    version = "kitchen-randomized-6"
+    # 7: kettle and microwave models with their own collision geometry, mass and handle (grasp plan per
+    #    model), two kettle sites, wider microwave and kettle ranges, photographic textures, cabinet handles
+    version = "kitchen-randomized-7"
 
     def __init__(self, task_id: str | None = None, mode: str = "demos", max_steps: int = MAX_STEPS):
         from d5rl.envs.kitchen.randomized.task import RandomizedKitchenEnv
@@ -94,7 +96,7 @@ class RandomizedKitchenGenerator:
         _, info0 = env.reset(seed=int(rng.integers(2**31)))
         attempted = [s for s in subtasks if rng.random() >= op.give_up]
         # an abandoned subtask is still approached for a while (a failed attempt), then dropped
-        policy = Demonstrator(env, attempted, rng, style=op.style(rng))
+        policy = Demonstrator(env, attempted, rng, style=op.style(rng), transit_first=True)
         cols = np.array([SUBTASK_NAMES.index(s) for s in subtasks])
         hold_noise = np.zeros(9)
 
