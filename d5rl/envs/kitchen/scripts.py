@@ -279,11 +279,11 @@ def kettle(ctx: Context) -> Iterator[Phase]:
     """Grasp the handle from the front (palm against it), lift, glide to the top-left burner, set
     it down, let go.  (From above, the knob panel over the top burners is in the way.)"""
     plan = grasp_plan(ctx, "kettle", KettleGrasp())
-    handle = ctx.site("kettle_site") + np.array([ctx.rng.uniform(-plan.along, plan.along), 0, 0])
     rot = R_FORWARD_FLAT
-    n = _approach_dir(rot)
     up = np.array([0.0, 0.0, 1.0])
+    handle = ctx.site("kettle_site") + np.array([ctx.rng.uniform(-plan.along, plan.along), 0, 0])
     grasp = handle + np.array([0, ctx.rng.uniform(0.0, 0.01), 0])
+    n = _approach_dir(rot)
     offset = grasp - ctx.site("kettle_site")
     goal_handle = KETTLE_GOAL_HANDLE + (ctx.kettle_handle_offset() - KETTLE_STOCK_HANDLE)
     yield Phase("pre-grasp", fixed_target(grasp - ctx.rng.uniform(0.10, 0.14) * n, rot), tol=0.03, rot_tol=0.2)

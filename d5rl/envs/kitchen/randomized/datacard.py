@@ -31,7 +31,6 @@ def operator_solves(subtask: str, replace: dict, seed: int, steps: int = 250, be
     """Whether the skilled operator gets ``subtask``'s object to its goal within ``steps`` (after doing
     the ``before`` subtasks), in a random domain with the fields ``replace`` set."""
     from d5rl.envs.kitchen.demonstrator import Demonstrator
-    from d5rl.envs.kitchen.randomized.task import RandomizedKitchenEnv
     from d5rl.envs.kitchen.subtasks import SUBTASK_NAMES
 
     rng = np.random.default_rng([7, seed])
@@ -125,7 +124,7 @@ def full_stats() -> dict[str, dict]:
             for mode, task in DATASETS.items()}
 
 
-def domain_grid(path: str, n: int = 8, seed: int = 0, size: int = 160) -> None:
+def domain_grid(path: str, n: int = 8, seed: int = 0, size: int = 128) -> None:
     """A PNG grid: ``n`` random domains (rows) seen by the left, right and wrist cameras at reset."""
     import imageio.v3 as iio
 

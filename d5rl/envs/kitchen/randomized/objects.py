@@ -25,7 +25,6 @@ from __future__ import annotations
 import dataclasses
 
 import mujoco
-import numpy as np
 
 from d5rl.envs.kitchen.scripts import KettleGrasp, MicrowaveGrasp
 
@@ -48,7 +47,7 @@ class KettleModel:
 
 # body primitives sit on the burner like the stock kettle's collision box (bottom at z = 0)
 _WIDE = (_CYL, (0.105, 0.07, 0.0), 0.07)
-_TALL = (_CYL, (0.085, 0.1, 0.0), 0.10)
+_TALL = (_CYL, (0.09, 0.1, 0.0), 0.10)
 _ROUND = (_ELLIPSOID, (0.115, 0.115, 0.09), 0.105)  # on a flat foot (an ellipsoid alone rocks over)
 _BOXY = (_BOX, (0.1, 0.1, 0.065), 0.065)
 KETTLES = (
@@ -56,8 +55,8 @@ KETTLES = (
     KettleModel("boxy", _BOXY, 0.8, (0.024, 0.09), (0.75, 0.75, 0.78, 1)),
     KettleModel("wide, thin bar", _WIDE, 1.0, (0.02, 0.08), (0.55, 0.12, 0.1, 1)),
     KettleModel("wide, thick bar", _WIDE, 1.1, (0.03, 0.1), (0.1, 0.3, 0.55, 1)),
-    KettleModel("tall, thin bar", _TALL, 0.75, (0.02, 0.07), (0.15, 0.15, 0.15, 1)),
-    KettleModel("tall, thick bar", _TALL, 0.7, (0.028, 0.085), (0.85, 0.85, 0.8, 1)),
+    KettleModel("tall, thin bar", _TALL, 0.95, (0.02, 0.07), (0.15, 0.15, 0.15, 1)),
+    KettleModel("tall, thick bar", _TALL, 1.0, (0.028, 0.085), (0.85, 0.85, 0.8, 1)),
     KettleModel("round, thick bar", _ROUND, 1.2, (0.026, 0.095), (0.2, 0.45, 0.3, 1)),
     KettleModel("round, long bar", _ROUND, 1.3, (0.022, 0.12), (0.7, 0.5, 0.15, 1)),
 )
