@@ -166,7 +166,11 @@ class Dataset:
         first = self.episode_step_starts[episodes]
         rows = np.maximum(steps[:, None] - np.arange(k - 1, -1, -1), first[:, None])
         frames = arr[rows.reshape(-1)].reshape(rows.shape + arr.shape[1:])  # one gather (one decode per chunk)
-        return np.concatenate(list(np.moveaxis(frames, 1, 0)), axis=-1)
+        c = frames.shape[-1]
+        out = np.empty(frames.shape[:1] + frames.shape[2:-1] + (k * c,), frames.dtype)
+        for j in range(k):
+            out[..., j * c: (j + 1) * c] = frames[:, j]
+        return out
 
     def _obs_pair(self, steps: np.ndarray, frame_stack: int, episodes: np.ndarray):
         """Observations at ``steps`` and ``steps + 1``; stacked frames of both come from one gather of
