@@ -12,13 +12,15 @@ File layout (``<key>.zch``; the sha256 of the whole file is in the shard record,
     MAGIC | chunk 0 | chunk 1 | ... | row starts int64 (n+1) | byte offsets int64 (n+1) | header JSON
           | u64 header length | u64 n | MAGIC
 
-Decoded chunks are kept in a small per-process LRU cache (:data:`CACHE_BYTES`), so the
-frames of a stack and of the next observation cost one decode.
+A gather (``arr[indices]``) decodes each chunk it touches once, so the frames of a stack and of
+the next observation, fetched together by ``Dataset.sample``, cost one decode.  Decoded chunks
+are not cached between calls: random batches of a dataset much larger than RAM would rarely hit
+such a cache (a 256 MB LRU cache measured no faster, see ``bench/dataset_sampling.py``'s history
+in the CHANGELOG), and datasets up to 1 GiB are decoded into RAM when loaded.
 """
 
 from __future__ import annotations
 
-import collections
 import json
 import os
 import struct
@@ -36,7 +38,6 @@ SUFFIX = ".zch"
 # a batch decodes every chunk holding one of its rows, so fewer rows per chunk decode less
 CHUNK_ROWS = 8
 LEVEL = 9  # zstd level: ~110 MB/s to compress (a renderer makes ~3 MB/s), 6.1x vs 5.7x at level 3
-CACHE_BYTES = int(os.environ.get("D5RL_CHUNK_CACHE_MB", "256")) << 20
 _TAIL = struct.Struct("<QQ8s")
 
 
@@ -88,32 +89,6 @@ class ChunkWriter:
         return (self._n, *self.row_shape)
 
 
-class _LRU:
-    """Decoded chunks, least recently used dropped first, within a byte budget (per process)."""
-
-    def __init__(self, budget: int):
-        self.budget, self.used = budget, 0
-        self.items: collections.OrderedDict = collections.OrderedDict()
-
-    def get(self, key):
-        hit = self.items.get(key)
-        if hit is not None:
-            self.items.move_to_end(key)
-        return hit
-
-    def put(self, key, value: np.ndarray) -> None:
-        if value.nbytes > self.budget:
-            return
-        self.items[key] = value
-        self.used += value.nbytes
-        while self.used > self.budget:
-            _, old = self.items.popitem(last=False)
-            self.used -= old.nbytes
-
-
-CACHE = _LRU(CACHE_BYTES)
-
-
 class CompressedArray:
     """A read-only array over a ``.zch`` file (or its first ``rows`` rows): ``len``, ``shape``,
     ``dtype``, integer / slice / integer-array indexing and ``np.asarray``, decoding only the
@@ -143,7 +118,6 @@ class CompressedArray:
         self.shape = (total if rows is None else int(rows), *self.row_shape)
         if not 0 <= self.shape[0] <= total:
             raise ValueError(f"{rows} rows asked of an array of {total}")
-        self._key = (str(self.path.resolve()), os.stat(self.path).st_ino)
         self._dctx = None
 
     ndim = property(lambda self: len(self.shape))
@@ -163,10 +137,6 @@ class CompressedArray:
 
     def chunk(self, c: int) -> np.ndarray:
         """Decoded chunk ``c`` (rows ``row_starts[c]:row_starts[c+1]``), read-only."""
-        key = (self._key, c)
-        hit = CACHE.get(key)
-        if hit is not None:
-            return hit
         if self._dctx is None:
             self._dctx = _zstd().ZstdDecompressor()
         blob = self._buf[self.offsets[c]: self.offsets[c + 1]]
@@ -178,9 +148,7 @@ class CompressedArray:
         arr = np.frombuffer(raw, self.dtype)
         if arr.size != n * int(np.prod(self.row_shape)):
             raise CorruptChunkError(f"{self.path}: chunk {c} decodes to {arr.size} values, expected rows {n}")
-        arr = arr.reshape((n, *self.row_shape))
-        CACHE.put(key, arr)
-        return arr
+        return arr.reshape((n, *self.row_shape))
 
     def __array__(self, dtype=None, copy=None):
         out = self[np.arange(len(self))]
