@@ -110,24 +110,38 @@ def _stats(metas: list[dict]) -> dict:
 def stats_table(stats: dict[str, dict]) -> list[str]:
     rows = ["| dataset | episodes | objects/episode (ours) | paper | difference | subtasks asked | all asked solved "
             "| operators |", "|---|---|---|---|---|---|---|---|"]
-    for mode, s in stats.items():
-        rows.append(f"| {mode} | {s['episodes']} | {s['objects_per_episode']:.2f} ± {s['objects_std']:.2f} | "
+    for name, s in stats.items():
+        mode = name.split()[0]
+        rows.append(f"| {name} | {s['episodes']} | {s['objects_per_episode']:.2f} ± {s['objects_std']:.2f} | "
                     f"{PAPER[mode]} | {s['objects_per_episode'] - PAPER[mode]:+.2f} | {s['subtasks_asked']:.2f} | "
                     f"{100 * s['all_solved']:.1f}% | {s['operators']} |")
     return rows
 
 
 def full_stats() -> dict[str, dict]:
-    """Statistics of the generated datasets (those that are complete on disk)."""
+    """Statistics of the generated datasets; of a dataset still being generated, of its finished
+    shards (a prefix of its episodes; each shard checked against its checksums)."""
+    from d5rl.datasets import format as fmt
+    from d5rl.datasets import generation
     from d5rl.datasets.loading import load_dataset
     from d5rl.errors import DatasetNotFoundError
+    from d5rl.registry import get_spec
 
     out = {}
     for mode, task in DATASETS.items():
         try:
             out[mode] = _stats(load_dataset(task, generate=False, render=False, progress=False).episode_meta)
-        except DatasetNotFoundError as e:
-            print(f"skipped {mode}: {e.message}")
+        except DatasetNotFoundError:
+            dspec = generation.dataset_spec(get_spec(task))
+            shards = sorted((generation.dataset_root(dspec, dspec.default_seed) / "shards").glob("shard-*"))
+            metas = []
+            for d in shards:  # contiguous finished shards from the first
+                rec = fmt.read_shard_record(d)
+                if rec["episodes"][0] != len(metas) or fmt.check_shard(d, rec):
+                    break
+                metas += rec["episode_meta"]
+            if metas:
+                out[f"{mode} (first {len(metas)} of {dspec.num_episodes}, generation running)"] = _stats(metas)
     return out
 
 
