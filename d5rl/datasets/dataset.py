@@ -20,7 +20,8 @@ from d5rl.errors import DatasetCorruptError
 
 
 class ChunkedArray:
-    """A read-only concatenation of arrays (usually memory-mapped shards) along axis 0.
+    """A read-only concatenation of arrays (memory-mapped shards, or compressed ones:
+    :class:`d5rl.datasets.chunks.CompressedArray`) along axis 0.
 
     Supports ``len``, ``shape``, ``dtype``, integer / slice / integer-array
     indexing and ``np.asarray`` without ever concatenating the chunks on access.
@@ -75,7 +76,7 @@ class ChunkedArray:
         if flat.size and (flat.min() < 0 or flat.max() >= len(self)):
             raise IndexError(f"index out of range for length {len(self)}")
         out = np.empty((flat.size,) + self.shape[1:], self.dtype)
-        if len(self.chunks) == 1:
+        if len(self.chunks) == 1 and isinstance(self.chunks[0], np.ndarray):
             np.take(self.chunks[0], flat, axis=0, out=out)
             return out.reshape(idx.shape + self.shape[1:])
         which = np.searchsorted(self.ends, flat, side="right")
@@ -163,8 +164,32 @@ class Dataset:
     def _stacked(self, arr, steps: np.ndarray, k: int, episodes: np.ndarray) -> np.ndarray:
         """Frames ``steps-k+1 .. steps`` (clamped at the episode's first step), stacked on the channel axis."""
         first = self.episode_step_starts[episodes]
-        frames = [arr[np.maximum(steps - j, first)] for j in range(k - 1, -1, -1)]
-        return np.concatenate(frames, axis=-1)
+        rows = np.maximum(steps[:, None] - np.arange(k - 1, -1, -1), first[:, None])
+        frames = arr[rows.reshape(-1)].reshape(rows.shape + arr.shape[1:])  # one gather (one decode per chunk)
+        c = frames.shape[-1]
+        out = np.empty(frames.shape[:1] + frames.shape[2:-1] + (k * c,), frames.dtype)
+        for j in range(k):
+            out[..., j * c: (j + 1) * c] = frames[:, j]
+        return out
+
+    def _obs_pair(self, steps: np.ndarray, frame_stack: int, episodes: np.ndarray):
+        """Observations at ``steps`` and ``steps + 1``; stacked frames of both come from one gather of
+        ``frame_stack + 1`` rows per sample (compressed frames: each chunk decoded once)."""
+        if frame_stack <= 1:
+            return self._obs_at(steps, frame_stack, episodes), self._obs_at(steps + 1, frame_stack, episodes)
+        obs, nxt = {}, {}
+        for key in self.obs_keys:
+            arr = self.arrays[key]
+            if arr.ndim >= 3:
+                both = self._stacked(arr, steps + 1, frame_stack + 1, episodes)
+                c = both.shape[-1] // (frame_stack + 1)
+                obs[key], nxt[key] = both[..., : frame_stack * c], both[..., c:]
+            else:
+                obs[key], nxt[key] = arr[steps], arr[steps + 1]
+        if self.obs_keys == ["observations"]:
+            return obs["observations"], nxt["observations"]
+        strip = len("observations/")
+        return {k[strip:]: v for k, v in obs.items()}, {k[strip:]: v for k, v in nxt.items()}
 
     @property
     def observations(self):
@@ -210,12 +235,12 @@ class Dataset:
             "timeouts": self.arrays["timeouts"][idx],
         }
         steps = self.transition_step[idx]
-        batch["observations"] = self._obs_at(steps, frame_stack, eps)
         if n_step == 1:
+            batch["observations"], batch["next_observations"] = self._obs_pair(steps, frame_stack, eps)
             batch["rewards"] = self.arrays["rewards"][idx]
-            batch["next_observations"] = self._obs_at(steps + 1, frame_stack, eps)
             batch["masks"] = 1.0 - batch["terminals"].astype(np.float32)
         else:
+            batch["observations"] = self._obs_at(steps, frame_stack, eps)
             rewards, last, discounts = self._n_step(idx, eps, n_step, gamma)
             batch["rewards"] = rewards
             batch["next_observations"] = self._obs_at(last + eps + 1, frame_stack, eps)

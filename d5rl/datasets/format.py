@@ -16,7 +16,9 @@ last and lists every shard: its presence means the dataset is complete::
     │   │   ├── actions.npy rewards.npy terminals.npy timeouts.npy   (T rows)
     │   │   └── infos.<name>.npy            ("/" in a key is "." in its file name)
     │   └── shard-00001/ ...
-    └── renders/<cameras>-<H>x<W>/shard-00000/...   derived caches, same shard layout
+    └── renders/<cameras>-<H>x<W>/shard-00000/...   derived caches, same shard layout; camera
+                                                    frames as compressed chunks (``.zch``, see
+                                                    :mod:`d5rl.datasets.chunks`)
 
 Shards are written into a temporary sibling directory and renamed into place,
 so a killed writer never leaves a half shard behind, and generation resumes at
@@ -43,7 +45,7 @@ from typing import Iterable
 
 import numpy as np
 
-from d5rl.datasets import lock
+from d5rl.datasets import chunks, lock
 from d5rl.files import dump_json, owner_tag, write_atomic
 from d5rl.errors import D5RLError, DatasetCorruptError, DatasetVersionError
 
@@ -54,14 +56,14 @@ STAMP = ".verified.json"
 _HASH_CHUNK = 1 << 22
 
 
-def key_to_filename(key: str) -> str:
+def key_to_filename(key: str, suffix: str = ".npy") -> str:
     if "." in key or key.startswith("/") or key.endswith("/") or "//" in key:
         raise ValueError(f"array key {key!r} may not contain '.' or empty path parts")
-    return key.replace("/", ".") + ".npy"
+    return key.replace("/", ".") + suffix
 
 
 def filename_to_key(name: str) -> str:
-    return name[: -len(".npy")].replace(".", "/")
+    return name.rsplit(".", 1)[0].replace(".", "/")
 
 
 def shard_name(index: int) -> str:
@@ -165,6 +167,7 @@ class ShardWriter:
             shutil.rmtree(self.tmp)
         self.tmp.mkdir(parents=True)
         self._keys: list[str] = []
+        self._chunked: dict[str, chunks.ChunkWriter] = {}
 
     def write(self, key: str, array: np.ndarray) -> None:
         np.save(self.tmp / key_to_filename(key), np.ascontiguousarray(array), allow_pickle=False)
@@ -174,20 +177,35 @@ class ShardWriter:
         self._keys.append(key)
         return np.lib.format.open_memmap(self.tmp / key_to_filename(key), mode="w+", dtype=dtype, shape=shape)
 
+    def open_chunked(self, key: str, row_shape: tuple[int, ...], dtype) -> chunks.ChunkWriter:
+        """A losslessly compressed array (:mod:`d5rl.datasets.chunks`) streamed episode by episode
+        with ``.append(rows)``; closed by :meth:`commit`."""
+        w = chunks.ChunkWriter(self.tmp / key_to_filename(key, chunks.SUFFIX), row_shape, dtype)
+        self._chunked[key] = w
+        self._keys.append(key)
+        return w
+
     def commit(self, meta: dict, aligns: dict[str, str]) -> dict:
         """Checksum every array, write ``shard.json``, rename into place; return the shard record."""
         arrays = {}
         for key in sorted(set(self._keys)):
-            path = self.tmp / key_to_filename(key)
-            arr = np.load(path, mmap_mode="r")
+            if key in self._chunked:
+                w = self._chunked[key]
+                shape, dtype, path = w.close(), w.dtype, w.path
+            else:
+                path = self.tmp / key_to_filename(key)
+                arr = np.load(path, mmap_mode="r")
+                shape, dtype = arr.shape, arr.dtype
+                del arr
             arrays[key] = {
                 "file": path.name,
                 "sha256": sha256_file(path),
-                "shape": list(arr.shape),
-                "dtype": arr.dtype.str,
+                "shape": list(shape),
+                "dtype": dtype.str,
                 "align": aligns[key],
             }
-            del arr
+            if key in self._chunked:
+                arrays[key]["encoding"] = chunks.ENCODING
         record = {**meta, "format_version": FORMAT_VERSION, "name": self.final.name, "arrays": arrays}
         dump_json(record, self.tmp / SHARD_META)
         for p in self.tmp.iterdir():  # make the data durable before the rename publishes it
@@ -204,7 +222,13 @@ class ShardWriter:
             shutil.rmtree(old, ignore_errors=True)
         return record
 
+    @property
+    def keys(self) -> list[str]:
+        return sorted(set(self._keys))
+
     def abort(self) -> None:
+        for w in self._chunked.values():
+            w.abort()
         shutil.rmtree(self.tmp, ignore_errors=True)
 
 
@@ -235,10 +259,20 @@ def read_shard_record(shard_dir: Path) -> dict:
     return record
 
 
-def open_array(shard_dir: Path, info: dict, mmap: bool = True) -> np.ndarray:
+def open_array(shard_dir: Path, info: dict, mmap: bool = True) -> np.ndarray | chunks.CompressedArray:
+    """One array of a shard: memory-mapped ``.npy`` (read into RAM if not ``mmap``) or, for an
+    ``encoding`` of :mod:`d5rl.datasets.chunks`, a :class:`~d5rl.datasets.chunks.CompressedArray`
+    that decodes the rows asked for."""
     path = shard_dir / info["file"]
+    encoding = info.get("encoding")
+    if encoding not in (None, chunks.ENCODING):
+        raise DatasetVersionError(f"{path} is stored as {encoding!r}, which this d5rl does not read",
+                                  "use the d5rl version that wrote it, or regenerate: `d5rl generate TASK --force`")
     try:
-        arr = np.load(path, mmap_mode="r" if mmap else None, allow_pickle=False)
+        if encoding is None:
+            arr = np.load(path, mmap_mode="r" if mmap else None, allow_pickle=False)
+        else:
+            arr = chunks.CompressedArray(path)
     except FileNotFoundError:
         raise DatasetCorruptError(f"missing array file {path}", _regen_hint(shard_dir)) from None
     except ValueError as e:
@@ -249,6 +283,11 @@ def open_array(shard_dir: Path, info: dict, mmap: bool = True) -> np.ndarray:
             _regen_hint(shard_dir),
         )
     return arr
+
+
+def first_rows(arr, rows: int):
+    """The first ``rows`` rows of an opened array, without reading or decoding them."""
+    return arr.head(rows) if isinstance(arr, chunks.CompressedArray) else arr[:rows]
 
 
 def verify_shard(shard_dir: Path, expected: dict | None = None) -> list[str]:

@@ -34,7 +34,7 @@ def _shard_chunks(shard_dirs: list[Path], records: list[dict], n_eps_last: int |
         for key, info in rec["arrays"].items():
             arr = fmt.open_array(d, info)
             rows = n_t + (keep if info["align"] == "step" else 0)
-            chunks.setdefault(key, []).append(arr[:rows])
+            chunks.setdefault(key, []).append(fmt.first_rows(arr, rows))
             aligns[key] = info["align"]
     return chunks, aligns
 

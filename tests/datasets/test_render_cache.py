@@ -47,6 +47,7 @@ def test_renders_every_shard_then_reuses_it(tmp_path):
     assert sorted(CALLS) == [0, 1, 2]
     rec = fmt.read_shard_record(out / "shard-00000")
     assert rec["episode_lengths"] == [3, 2] and rec["arrays"]["observations/pixels/toy"]["align"] == "step"
+    assert rec["arrays"]["observations/pixels/toy"]["encoding"] == "zstd-chunks-1"  # frames stored compressed
     frames = fmt.open_array(out / "shard-00000", rec["arrays"]["observations/pixels/toy"])
     assert frames.shape == (3 + 1 + 2 + 1, 4, 4, 3) and frames.dtype == np.uint8
     np.testing.assert_array_equal(frames[:4, 0, 0, 0], [0, 10, 20, 30])  # rendered from the stored states
@@ -98,3 +99,33 @@ def test_process_pool(tmp_path):
     out = ensure_render_cache(tmp_path, manifest, FN, {"size": 4}, name="pool", workers=2, progress=False)
     for shard in ("shard-00000", "shard-00001"):
         assert not fmt.verify_shard(out / shard)
+
+
+def test_an_uncompressed_cache_of_an_older_version_is_compressed_with_a_message(tmp_path, capsys):
+    manifest = _write_dataset(tmp_path, [[3, 2], [4]])
+    out = ensure_render_cache(tmp_path, manifest, FN, {"size": 4}, name="old", workers=1, progress=False)
+    expected = {}
+    for i in range(2):  # rewrite each cache shard as an older d5rl did: raw .npy frames
+        d = out / f"shard-0000{i}"
+        rec = fmt.read_shard_record(d)
+        frames = np.asarray(fmt.open_array(d, rec["arrays"]["observations/pixels/toy"]))
+        expected[i] = frames
+        w = fmt.ShardWriter(out, i, lock_root=tmp_path)
+        w.write("observations/pixels/toy", frames)
+        meta = {k: v for k, v in rec.items() if k not in ("format_version", "name", "arrays")}
+        assert "encoding" not in w.commit(meta, {"observations/pixels/toy": "step"})["arrays"]["observations/pixels/toy"]
+    capsys.readouterr()
+    CALLS.clear()
+    ensure_render_cache(tmp_path, manifest, FN, {"size": 4}, name="old", workers=1, progress=False)
+    assert CALLS == []  # nothing rendered again
+    assert "uncompressed frames written by an older d5rl" in capsys.readouterr().err
+    for i in range(2):
+        d = out / f"shard-0000{i}"
+        rec = fmt.read_shard_record(d)
+        info = rec["arrays"]["observations/pixels/toy"]
+        assert info["encoding"] == "zstd-chunks-1" and not fmt.verify_shard(d)
+        np.testing.assert_array_equal(np.asarray(fmt.open_array(d, info)), expected[i])  # bit-exact
+        assert not list(d.glob("*.npy"))
+    capsys.readouterr()
+    ensure_render_cache(tmp_path, manifest, FN, {"size": 4}, name="old", workers=1, progress=False)
+    assert capsys.readouterr().err == ""  # compressed once

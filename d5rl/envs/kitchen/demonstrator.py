@@ -21,6 +21,7 @@ import numpy as np
 
 from d5rl.envs.kitchen.controller import Controller, rot_z
 from d5rl.envs.kitchen.scripts import OPEN, SCRIPTS, Context, Phase, fixed_target
+from d5rl.envs.kitchen.subtasks import SUBTASK_NAMES
 
 
 # --- the policy -----------------------------------------------------------------------------------
@@ -68,8 +69,17 @@ class Demonstrator:
     The env must be reset before the policy is made.  ``rng`` drives every random choice.
     """
 
-    def __init__(self, env, subtasks, rng: np.random.Generator, style: Style | None = None):
+    def __init__(self, env, subtasks, rng: np.random.Generator, style: Style | None = None,
+                 transit_first: bool = False, retries: int = 0):
         self.env = env
+        # tries again (up to ``retries`` times, after the remaining subtasks) at a subtask whose object
+        # is not at its goal after its script, as a teleoperator would; the standard kitchen's data is
+        # made without retries
+        self.retries = int(retries)
+        # also consider a joint-space transit before the first subtask (the randomized kitchen's far
+        # kettle site is out of the resolved-rate reach from the rest pose); the standard kitchen's
+        # data keeps its first moves
+        self.transit_first = transit_first
         self.subtasks = list(subtasks)
         self.rng = rng
         self.style = style or Style.sample(rng)
@@ -87,24 +97,34 @@ class Demonstrator:
         self.log: list[tuple] = []  # (subtask, phase, steps, final position error) of finished phases
 
     def _phases(self) -> Iterator[Phase]:
-        for k, name in enumerate(self.subtasks):
+        queue = [(name, 0) for name in self.subtasks]  # (subtask, retries so far)
+        k = 0
+        while queue:
+            name, tries = queue.pop(0)
             self.current_subtask = name
-            first = True
-            for ph in SCRIPTS[name](self.ctx):
-                if first and k > 0:
-                    pos, rot = ph.target(self.ctx)
-                    far = np.linalg.norm(pos - self.ctx.ee_pos) > TRANSIT_DISTANCE
-                    wound = name in TRANSIT_IF_WOUND and self._wrist_wound()
-                    if far or wound or name in TRANSIT_ALWAYS:
-                        q = self._transit_joints(pos + self.ctx.jitter(TRANSIT_JITTER), rot, ph)
-                        yield Phase("transit", lambda c: (c.ee_pos, c.ee_rot), grip=ph.grip, joints=q, tol=0.15,
-                                    max_steps=60, speed=TRANSIT_SPEED, freeze=True)
-                if first and self.rng.random() < self.style.via_prob:
-                    via = self.ctx.ee_pos + self.rng.uniform([-0.08, -0.1, -0.02], [0.08, 0.02, 0.1])
-                    yield Phase("via", fixed_target(via, self.ctx.ee_rot), grip=ph.grip, tol=0.04, rot_tol=9, max_steps=8)
-                first = False
-                yield ph
+            yield from self._attempt(name, k > 0 or self.transit_first)
+            k += 1
+            if tries < self.retries and not self.env.completed()[SUBTASK_NAMES.index(name)]:
+                queue.append((name, tries + 1))  # not done: try again after the others, as people do
         self.current_subtask = None
+
+    def _attempt(self, name: str, transit: bool) -> Iterator[Phase]:
+        """The phases of one try at subtask ``name``, after a joint-space transit if ``transit`` and needed."""
+        first = True
+        for ph in SCRIPTS[name](self.ctx):
+            if first and transit:
+                pos, rot = ph.target(self.ctx)
+                far = np.linalg.norm(pos - self.ctx.ee_pos) > TRANSIT_DISTANCE
+                wound = name in TRANSIT_IF_WOUND and self._wrist_wound()
+                if far or wound or name in TRANSIT_ALWAYS:
+                    q = self._transit_joints(pos + self.ctx.jitter(TRANSIT_JITTER), rot, ph)
+                    yield Phase("transit", lambda c: (c.ee_pos, c.ee_rot), grip=ph.grip, joints=q, tol=0.15,
+                                max_steps=60, speed=TRANSIT_SPEED, freeze=True)
+            if first and self.rng.random() < self.style.via_prob:
+                via = self.ctx.ee_pos + self.rng.uniform([-0.08, -0.1, -0.02], [0.08, 0.02, 0.1])
+                yield Phase("via", fixed_target(via, self.ctx.ee_rot), grip=ph.grip, tol=0.04, rot_tol=9, max_steps=8)
+            first = False
+            yield ph
 
     def _wrist_wound(self) -> bool:
         q = self.ctx.data.qpos[4:7]

@@ -44,6 +44,28 @@ class Phase:
     straight: bool = False
 
 
+@dataclasses.dataclass(frozen=True)
+class MicrowaveGrasp:
+    """How the operator grasps the microwave door's handle, a vertical bar (defaults: the stock one's)."""
+
+    dz: tuple[float, float] = (-0.04, 0.04)  # m, uniform grasp height from the handle site along the bar
+    depth: float = 0.015  # m past the handle's axis
+
+
+@dataclasses.dataclass(frozen=True)
+class KettleGrasp:
+    """How the operator grasps the kettle's handle (a horizontal bar on top, from the front, the fingers
+    closing on it from above and below) and lifts it; the defaults are the stock kettle's."""
+
+    along: float = 0.015  # m, uniform grasp offset along the bar (+-)
+    lift: tuple[float, float] = (0.07, 0.09)  # m, uniform lift height
+
+
+def grasp_plan(ctx: "Context", subtask: str, default):
+    """The env's grasp plan for ``subtask`` (the randomized kitchen's object models), else ``default``."""
+    return getattr(ctx.env, "grasp_plans", {}).get(subtask, default)
+
+
 class Context:
     """What a script reads: the model/data, object accessors and this episode's variation."""
 
@@ -73,6 +95,10 @@ class Context:
     @property
     def ee_rot(self) -> np.ndarray:
         return self.data.site_xmat[self._site].reshape(3, 3).copy()
+
+    def kettle_handle_offset(self) -> np.ndarray:
+        """The kettle's handle site in the kettle body's frame (models differ)."""
+        return self.model.site_pos[self.model.site("kettle_site").id].copy()
 
     def jitter(self, scale: float) -> np.ndarray:
         return self.rng.normal(0.0, scale, size=3)
@@ -136,10 +162,11 @@ def _grasp_and_swing(ctx: Context, hinge_body: str, handle_site: str, joint: str
 
 
 def microwave(ctx: Context) -> Iterator[Phase]:
+    plan = grasp_plan(ctx, "microwave", MicrowaveGrasp())
     yaw = np.arctan2(-ctx.body_mat("microdoorroot")[0, 1], ctx.body_mat("microdoorroot")[1, 1])
     rot = rot_z(yaw) @ R_FORWARD
-    yield from _grasp_and_swing(ctx, "microdoorroot", "microhandle_site", "microwave", -0.72, rot, 0.4, 0.015,
-                                enough=-0.62)
+    yield from _grasp_and_swing(ctx, "microdoorroot", "microhandle_site", "microwave", -0.72, rot, 0.4, plan.depth,
+                                dz=plan.dz, enough=-0.62)
 
 
 def hinge_cabinet(ctx: Context) -> Iterator[Phase]:
@@ -227,6 +254,7 @@ def light_switch(ctx: Context) -> Iterator[Phase]:
 
 
 KETTLE_GOAL_HANDLE = np.array([-0.234, 0.748, 1.879])  # handle site with the kettle at its goal pose
+KETTLE_STOCK_HANDLE = np.array([0.0, 0.0, 0.259])  # the stock kettle's handle site in the kettle's frame
 
 
 def _glide(start: np.ndarray | None, goal: np.ndarray, rot: np.ndarray, steps: int, relative: bool = False):
@@ -250,22 +278,24 @@ def _glide(start: np.ndarray | None, goal: np.ndarray, rot: np.ndarray, steps: i
 def kettle(ctx: Context) -> Iterator[Phase]:
     """Grasp the handle from the front (palm against it), lift, glide to the top-left burner, set
     it down, let go.  (From above, the knob panel over the top burners is in the way.)"""
-    handle = ctx.site("kettle_site") + np.array([ctx.rng.uniform(-0.015, 0.015), 0, 0])
+    plan = grasp_plan(ctx, "kettle", KettleGrasp())
     rot = R_FORWARD_FLAT
-    n = _approach_dir(rot)
     up = np.array([0.0, 0.0, 1.0])
+    handle = ctx.site("kettle_site") + np.array([ctx.rng.uniform(-plan.along, plan.along), 0, 0])
     grasp = handle + np.array([0, ctx.rng.uniform(0.0, 0.01), 0])
+    n = _approach_dir(rot)
     offset = grasp - ctx.site("kettle_site")
+    goal_handle = KETTLE_GOAL_HANDLE + (ctx.kettle_handle_offset() - KETTLE_STOCK_HANDLE)
     yield Phase("pre-grasp", fixed_target(grasp - ctx.rng.uniform(0.10, 0.14) * n, rot), tol=0.03, rot_tol=0.2)
     # follow the handle live: the arm may have nudged the kettle on its way
     yield Phase("reach", lambda c: (c.site("kettle_site") + offset, rot), tol=0.01, max_steps=25, speed=0.8,
                 straight=True)
     yield _hold("grasp", CLOSE, 5)
-    lift = ctx.rng.uniform(0.07, 0.09)
+    lift = ctx.rng.uniform(*plan.lift)
     n_lift = int(ctx.rng.integers(5, 8))
     yield Phase("lift", _glide(None, lift * up, rot, n_lift, relative=True), grip=CLOSE, done=_never,
                 max_steps=n_lift + 2)
-    goal = KETTLE_GOAL_HANDLE + np.array([ctx.rng.uniform(-0.01, 0.01), ctx.rng.uniform(-0.005, 0.015), 0.0])
+    goal = goal_handle + np.array([ctx.rng.uniform(-0.01, 0.01), ctx.rng.uniform(-0.005, 0.015), 0.0])
     n_carry = int(ctx.rng.integers(18, 26))
     yield Phase("carry", _glide(None, goal + lift * up, rot, n_carry), grip=CLOSE, tol=0.02, rot_tol=0.3,
                 min_steps=n_carry, max_steps=n_carry + 15)

@@ -96,3 +96,21 @@ def test_demonstrator_bars_full():
     assert solved.all(axis=1).mean() >= 0.8
 
 
+
+
+@pytest.mark.parametrize("retries", [0, 1])
+def test_a_failed_subtask_is_tried_again_after_the_others(retries):
+    """With ``retries``, a subtask whose object is not at its goal after its script is queued again after
+    the remaining subtasks; a finished one is not."""
+    env = KitchenEnv(obs_mode="state", tasks=("microwave", "light switch"))
+    env.reset(seed=0)
+    env.model.jnt_range[env.model.joint("microwave").id] = (-0.01, 0.0)  # the door is stuck: never done
+    policy = Demonstrator(env, ["microwave", "light switch"], np.random.default_rng(0), retries=retries)
+    for _ in range(450):
+        env.step(policy.act())
+        if policy.finished:
+            break
+    assert policy.finished
+    runs = [s for i, (s, *_) in enumerate(policy.log) if i == 0 or policy.log[i - 1][0] != s]
+    assert runs == ["microwave", "light switch"] + ["microwave"] * retries
+    assert env.completed()[4] and not env.completed()[0]  # light switch done once, microwave never

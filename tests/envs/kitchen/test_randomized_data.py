@@ -51,7 +51,7 @@ def _skilled_operator_solves(env, subtask: str, rng: np.random.Generator, steps:
     from d5rl.envs.kitchen.demonstrator import Demonstrator
     from d5rl.envs.kitchen.subtasks import SUBTASK_NAMES
 
-    policy = Demonstrator(env, [subtask], rng, style=rd.SKILLED.style(rng))
+    policy = Demonstrator(env, [subtask], rng, style=rd.SKILLED.style(rng), transit_first=True)
     column = SUBTASK_NAMES.index(subtask)
     for _ in range(steps):
         env.step(policy.act())
@@ -104,20 +104,31 @@ def test_each_microwave_model_has_its_own_handle_and_opens(model):
 
     import mujoco
 
-    from d5rl.envs.kitchen.randomized.domain import MICROWAVE_HANDLES, Domain, compiled_variant
+    from d5rl.envs.kitchen.randomized.domain import Domain, compiled_variant
+    from d5rl.envs.kitchen.randomized.objects import MICROWAVES
     from d5rl.envs.kitchen.randomized.task import RandomizedKitchenEnv
 
     stock, variant = compiled_variant(0, 0, 1), compiled_variant(model, 0, 1)
-    x, length, radius = MICROWAVE_HANDLES[model]
+    x, h = MICROWAVES[model].handle_pos
+    radius, length = MICROWAVES[model].handle_size
     assert variant.site("microhandle_site").pos[0] == pytest.approx(x)
     door = variant.body("microdoorroot").id
     bars = [g for g in range(variant.ngeom) if variant.geom_bodyid[g] == door
-            and variant.geom_type[g] == mujoco.mjtGeom.mjGEOM_CAPSULE and abs(variant.geom_pos[g][2]) < 1e-9]
-    assert len(bars) == 2  # the visual bar and the collision bar
-    assert any(variant.geom_conaffinity[g] for g in bars)
-    assert all(variant.geom_size[g][1] == pytest.approx(length) for g in bars)
+            and variant.geom_type[g] == mujoco.mjtGeom.mjGEOM_CAPSULE and variant.geom_size[g][1] == length]
+    assert len(bars) == 2 and sum(bool(variant.geom_conaffinity[g]) for g in bars) == 1  # drawn + colliding
+    assert all(variant.geom_size[g][0] == pytest.approx(radius) and variant.geom_pos[g][2] == pytest.approx(h)
+               for g in bars)
     assert not np.allclose(stock.site("microhandle_site").pos, variant.site("microhandle_site").pos)
     rng = np.random.default_rng(20 + model)
     env = RandomizedKitchenEnv(obs_mode="state", domain=dataclasses.replace(Domain.sample(rng), microwave=model))
     env.reset(seed=0)
     assert _skilled_operator_solves(env, "microwave", rng)
+
+
+@pytest.mark.slow
+@pytest.mark.parametrize("kettle", range(8))
+def test_skilled_operator_moves_every_kettle_model_from_both_sites(kettle):
+    from d5rl.envs.kitchen.randomized.datacard import operator_solves
+
+    for site in (0, 1):
+        assert sum(operator_solves("kettle", {"kettle": kettle, "kettle_site": site}, s) for s in range(3)) >= 2

@@ -48,25 +48,85 @@ def test_surface_textures_show_and_switch_without_recompiling(env):
     import dataclasses
 
     from d5rl.envs.kitchen.randomized import textures
-    from d5rl.envs.kitchen.randomized.domain import SURFACES
+    from d5rl.envs.kitchen.randomized.domain import SKINS, SURFACES
 
-    # the pattern pool is the same on every call (fixed seed) and its patterns differ
-    images = [textures.pattern_image(n, 32) for n in textures.NAMES]
-    assert np.array_equal(images[0], textures.pattern_image(textures.NAMES[0], 32))
-    assert all(not np.array_equal(a, b) for a, b in zip(images, images[1:]))
+    # the photographs load the same on every call, and the two scales differ (the 2x one is a tiling)
+    wood1, wood2 = textures.photo_image("wood", 1, 64), textures.photo_image("wood", 2, 64)
+    assert wood1.shape == (64, 64, 3) and not np.array_equal(wood1, wood2)
+    np.testing.assert_array_equal(wood2[:32, :32], wood2[32:, 32:])
+    assert wood1.std() > 5.0  # a photograph, not a flat colour
     env.reset(seed=11)
     d = env.domain
+
+    def with_skin(skin):
+        skins = tuple(skin if skin in SKINS[g] else SKINS[g][0] for g in SURFACES)
+        return dataclasses.replace(d, textures=skins, colors=((1.0, 1.0, 1.0, 1.0),) * len(SURFACES))
+
     shots = {}
-    for skin in ("plain", "checker", "wood"):
-        env.set_domain(dataclasses.replace(d, textures=(skin,) * len(SURFACES)))
+    for skin in ("plain", "wood@1", "tile@1"):
+        env.set_domain(with_skin(skin))
         shots[skin] = env.render_camera_image("left", 64, 64)
-    assert np.abs(shots["plain"].astype(float) - shots["checker"]).mean() > 3.0
-    assert np.abs(shots["checker"].astype(float) - shots["wood"]).mean() > 3.0
+    assert np.abs(shots["plain"].astype(float) - shots["wood@1"]).mean() > 3.0
+    assert np.abs(shots["wood@1"].astype(float) - shots["tile@1"]).mean() > 3.0
     # a renderer made after the switch draws the same image (textures are all uploaded up front)
-    fresh = RandomizedKitchenEnv(image_size=64, domain=dataclasses.replace(d, textures=("wood",) * len(SURFACES)))
+    fresh = RandomizedKitchenEnv(image_size=64, domain=with_skin("wood@1"))
     fresh.reset(seed=0)
     fresh.set_state(env.get_state())
-    assert np.array_equal(fresh.render_camera_image("left", 64, 64), shots["wood"])
+    assert np.array_equal(fresh.render_camera_image("left", 64, 64), shots["wood@1"])
+
+
+def test_every_object_model_has_its_own_collision_geometry_and_mass():
+    import mujoco
+
+    from d5rl.envs.kitchen.randomized import objects
+    from d5rl.envs.kitchen.randomized.domain import compiled_variant
+
+    def colliding(model, body):
+        b = model.body(body).id
+        rows = [(int(model.geom_type[g]), *np.round(model.geom_size[g], 4), *np.round(model.geom_pos[g], 4))
+                for g in range(model.ngeom) if model.geom_bodyid[g] == b and model.geom_conaffinity[g]]
+        return sorted(rows), round(float(model.body_mass[b]), 4)
+
+    kettles = [colliding(compiled_variant(0, k, 1), "kettleroot") for k in range(objects.NUM_KETTLES)]
+    for a in range(len(kettles)):
+        for b in range(a + 1, len(kettles)):
+            assert kettles[a][0] != kettles[b][0], (a, b)  # collision geometry differs
+    assert len({m for _, m in kettles}) >= 7  # and the mass (two models may weigh the same)
+    assert [m for _, m in kettles] == pytest.approx([k.mass for k in objects.KETTLES])
+    doors = [colliding(compiled_variant(k, 0, 1), "microdoorroot") for k in range(objects.NUM_MICROWAVES)]
+    shells = [colliding(compiled_variant(k, 0, 1), "microroot")[0] for k in range(objects.NUM_MICROWAVES)]
+    for a in range(len(doors)):
+        for b in range(a + 1, len(doors)):
+            assert doors[a] != doors[b] and shells[a] != shells[b], (a, b)
+    assert [m for _, m in doors] == pytest.approx([k.door_mass for k in objects.MICROWAVES])
+    # the handle the operator aims at is the handle that collides: the site lies on a colliding bar
+    for k in range(objects.NUM_KETTLES):
+        m = compiled_variant(0, k, 1)
+        d = mujoco.MjData(m)
+        mujoco.mj_forward(m, d)
+        site = d.site_xpos[m.site("kettle_site").id]
+        handle = [g for g in range(m.ngeom) if m.geom_bodyid[g] == m.body("kettleroot").id and m.geom_conaffinity[g]
+                  and m.geom_type[g] == mujoco.mjtGeom.mjGEOM_CAPSULE]
+        assert min(np.linalg.norm(d.geom_xpos[g] - site) for g in handle) < 1e-9, k
+
+
+def test_high_quality_renders_shadows_with_the_same_physics():
+    from d5rl.envs.kitchen.randomized.domain import Domain
+
+    d = Domain.sample(np.random.default_rng(2))
+    fast = RandomizedKitchenEnv(image_size=48, domain=d)
+    high = RandomizedKitchenEnv(image_size=48, domain=d, quality="high")
+    a, _ = fast.reset(seed=1)
+    b, _ = high.reset(seed=1)
+    for _ in range(3):
+        act = np.full(9, 0.3, np.float32)
+        a, *_ = fast.step(act)
+        b, *_ = high.step(act)
+    np.testing.assert_array_equal(fast.data.qpos, high.data.qpos)
+    assert high.model.vis.quality.shadowsize > 0 and fast.model.vis.quality.shadowsize == 0
+    assert np.abs(a["pixels/left"].astype(float) - b["pixels/left"]).mean() > 1.0
+    with pytest.raises(Exception, match="quality"):
+        RandomizedKitchenEnv(quality="ultra")
 
 
 def test_domain_from_an_older_version_is_refused():

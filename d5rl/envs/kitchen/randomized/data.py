@@ -11,8 +11,8 @@ operator's habits for 500 steps (after the last subtask the operator holds still
 
 Operators (:class:`Operator`): ``speed`` (phase speed), ``noise`` (smoothed action noise std),
 ``hesitation`` (chance of a short pause before each phase), ``detour`` (chance of a detour via a
-random point) and ``give_up`` (chance of abandoning a subtask attempt -- emulating a failed grasp
-that is not retried).  Stored per episode (meta): ``domain`` (re-render exactly with
+random point), ``give_up`` (chance of abandoning a subtask attempt -- emulating a failed grasp
+that is not retried) and ``retries`` (how often a subtask the script did not finish is tried again).  Stored per episode (meta): ``domain`` (re-render exactly with
 :func:`render_episode`), ``operator``, ``subtasks``, ``solved``.
 """
 
@@ -39,6 +39,7 @@ class Operator:
     hesitation: tuple[float, float]
     detour: tuple[float, float]
     give_up: float
+    retries: int = 0  # tries again at a subtask the script did not finish (at most this many times)
 
     def style(self, rng: np.random.Generator):
         from d5rl.envs.kitchen.demonstrator import Style
@@ -47,8 +48,10 @@ class Operator:
                      pause_prob=float(rng.uniform(*self.hesitation)), via_prob=float(rng.uniform(*self.detour)))
 
 
-SKILLED = Operator("skilled", speed=(1.0, 1.2), noise=(0.01, 0.03), hesitation=(0.0, 0.05), detour=(0.0, 0.1), give_up=0.0)
-AVERAGE = Operator("average", speed=(0.8, 1.1), noise=(0.03, 0.08), hesitation=(0.05, 0.2), detour=(0.1, 0.3), give_up=0.08)
+SKILLED = Operator("skilled", speed=(1.0, 1.2), noise=(0.01, 0.03), hesitation=(0.0, 0.05), detour=(0.0, 0.1), give_up=0.0,
+                   retries=3)
+AVERAGE = Operator("average", speed=(0.8, 1.1), noise=(0.03, 0.08), hesitation=(0.05, 0.2), detour=(0.1, 0.3), give_up=0.08,
+                   retries=1)
 NOVICE = Operator("novice", speed=(0.6, 0.9), noise=(0.08, 0.15), hesitation=(0.15, 0.35), detour=(0.3, 0.6), give_up=0.12)
 OPERATORS = {o.name: o for o in (SKILLED, AVERAGE, NOVICE)}
 MIXED_ORDER = tuple(MIXED)
@@ -69,7 +72,9 @@ class RandomizedKitchenGenerator:
     # 2: microwave pose noise; 3: integral action, wrist homing; 4: unwind; 5: straight reaches;
     # 6: joint-space transits, surface textures, microwave handles per model, wider microwave and kettle
     #    poses, kettle yaw (the domain draws more numbers, so every episode changes)
-    version = "kitchen-randomized-6"
+    # 7: kettle and microwave models with their own collision geometry, mass and handle (grasp plan per
+    #    model), two kettle sites, wider microwave and kettle ranges, photographic textures, cabinet handles
+    version = "kitchen-randomized-7"
 
     def __init__(self, task_id: str | None = None, mode: str = "demos", max_steps: int = MAX_STEPS):
         from d5rl.envs.kitchen.randomized.task import RandomizedKitchenEnv
@@ -94,7 +99,7 @@ class RandomizedKitchenGenerator:
         _, info0 = env.reset(seed=int(rng.integers(2**31)))
         attempted = [s for s in subtasks if rng.random() >= op.give_up]
         # an abandoned subtask is still approached for a while (a failed attempt), then dropped
-        policy = Demonstrator(env, attempted, rng, style=op.style(rng))
+        policy = Demonstrator(env, attempted, rng, style=op.style(rng), transit_first=True, retries=op.retries)
         cols = np.array([SUBTASK_NAMES.index(s) for s in subtasks])
         hold_noise = np.zeros(9)
 
