@@ -108,7 +108,7 @@ def test_each_microwave_model_has_its_own_handle_and_opens(model):
     from d5rl.envs.kitchen.randomized.objects import MICROWAVES
     from d5rl.envs.kitchen.randomized.task import RandomizedKitchenEnv
 
-    stock, variant = compiled_variant(0, 0, 1), compiled_variant(model, 0, 1)
+    stock, variant = compiled_variant(0, 0), compiled_variant(model, 0)
     x, h = MICROWAVES[model].handle_pos
     radius, length = MICROWAVES[model].handle_size
     assert variant.site("microhandle_site").pos[0] == pytest.approx(x)

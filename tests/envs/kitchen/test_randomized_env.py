@@ -1,3 +1,5 @@
+import functools
+
 import numpy as np
 import pytest
 
@@ -81,27 +83,29 @@ def test_every_object_model_has_its_own_collision_geometry_and_mass():
     from d5rl.envs.kitchen.randomized import objects
     from d5rl.envs.kitchen.randomized.domain import compiled_variant
 
+    compiled_variant = functools.lru_cache(compiled_variant)  # each (microwave, kettle) compiled once here
+
     def colliding(model, body):
         b = model.body(body).id
         rows = [(int(model.geom_type[g]), *np.round(model.geom_size[g], 4), *np.round(model.geom_pos[g], 4))
                 for g in range(model.ngeom) if model.geom_bodyid[g] == b and model.geom_conaffinity[g]]
         return sorted(rows), round(float(model.body_mass[b]), 4)
 
-    kettles = [colliding(compiled_variant(0, k, 1), "kettleroot") for k in range(objects.NUM_KETTLES)]
+    kettles = [colliding(compiled_variant(0, k), "kettleroot") for k in range(objects.NUM_KETTLES)]
     for a in range(len(kettles)):
         for b in range(a + 1, len(kettles)):
             assert kettles[a][0] != kettles[b][0], (a, b)  # collision geometry differs
     assert len({m for _, m in kettles}) >= 7  # and the mass (two models may weigh the same)
     assert [m for _, m in kettles] == pytest.approx([k.mass for k in objects.KETTLES])
-    doors = [colliding(compiled_variant(k, 0, 1), "microdoorroot") for k in range(objects.NUM_MICROWAVES)]
-    shells = [colliding(compiled_variant(k, 0, 1), "microroot")[0] for k in range(objects.NUM_MICROWAVES)]
+    doors = [colliding(compiled_variant(k, 0), "microdoorroot") for k in range(objects.NUM_MICROWAVES)]
+    shells = [colliding(compiled_variant(k, 0), "microroot")[0] for k in range(objects.NUM_MICROWAVES)]
     for a in range(len(doors)):
         for b in range(a + 1, len(doors)):
             assert doors[a] != doors[b] and shells[a] != shells[b], (a, b)
     assert [m for _, m in doors] == pytest.approx([k.door_mass for k in objects.MICROWAVES])
     # the handle the operator aims at is the handle that collides: the site lies on a colliding bar
     for k in range(objects.NUM_KETTLES):
-        m = compiled_variant(0, k, 1)
+        m = compiled_variant(0, k)
         d = mujoco.MjData(m)
         mujoco.mj_forward(m, d)
         site = d.site_xpos[m.site("kettle_site").id]
@@ -137,3 +141,17 @@ def test_domain_from_an_older_version_is_refused():
     del old["textures"]
     with pytest.raises(D5RLError, match="older version"):
         Domain.from_json(old)
+
+
+def test_lights_are_switched_not_compiled_and_state_envs_keep_one_model():
+    from d5rl.envs.kitchen.randomized.domain import MAX_EXTRA_LIGHTS
+
+    env = RandomizedKitchenEnv(obs_mode="state")
+    rng = np.random.default_rng(0)
+    domains = [Domain.sample(rng) for _ in range(12)]
+    assert len({d.num_lights for d in domains}) > 1
+    for i, d in enumerate(domains):
+        env.reset(seed=i, options={"domain": d})
+        lights = [env.model.light_active[env.model.light(f"rand_light{j}").id] for j in range(MAX_EXTRA_LIGHTS)]
+        assert lights == [j < d.num_lights for j in range(MAX_EXTRA_LIGHTS)]
+    assert env._variants == {}  # an environment that never rendered holds only its current model

@@ -1,9 +1,11 @@
 """Per-episode domains of the randomized kitchen, built with MjSpec (no XML string editing).
 
-A :class:`Domain` holds discrete choices (microwave model, kettle model, light count) that change the
-model's structure -- compiled once per choice and cached per process -- and continuous parameters
-(surface textures, tints and scales, light directions/colours, camera jitter, object poses) written
-into the compiled model or the start state.
+A :class:`Domain` holds discrete choices (microwave model, kettle model) that change the model's
+structure -- compiled per choice -- and parameters (surface textures, tints and scales, how many of
+the extra lights are on and their directions/colours, camera jitter, object poses) written into the
+compiled model or the start state.  A compiled variant is ~40 MB (mostly the stock textures), so only
+the few arrays :func:`apply_domain` resets from are kept per variant; environments keep their own
+copies (see ``RandomizedKitchenEnv.set_domain``).
 
 - Objects (:mod:`.objects`): 4 microwave and 8 kettle models, each with its own collision geometry,
   mass and handle, and the grasp plan the operator uses for it (``RandomizedKitchenEnv.grasp_plans``).
@@ -148,12 +150,13 @@ class Domain:
         return domain
 
     @property
-    def key(self) -> tuple[int, int, int]:
+    def key(self) -> tuple[int, int]:
         """The discrete choices that need their own compiled model."""
-        return (self.microwave, self.kettle, self.num_lights)
+        return (self.microwave, self.kettle)
 
 
 def _add_extra_lights(spec: mujoco.MjSpec, n: int, shadows: bool) -> None:
+    # all of them in every variant; a domain switches off those it does not use (``light_active``)
     for i in range(n):
         spec.worldbody.add_light(name=f"rand_light{i}", pos=(0, 0.5, 4.0), dir=(0, 0, -1), castshadow=shadows,
                                  diffuse=(0.3, 0.3, 0.3))
@@ -167,17 +170,33 @@ def _add_side_cameras(spec: mujoco.MjSpec) -> None:
         c.alt.xyaxes = xyaxes
 
 
-@functools.lru_cache(maxsize=32)
-def compiled_variant(microwave: int, kettle: int, num_lights: int, quality: str = "fast") -> mujoco.MjModel:
-    """The compiled kitchen for one discrete choice (cached per process)."""
+def compiled_variant(microwave: int, kettle: int, quality: str = "fast") -> mujoco.MjModel:
+    """The compiled kitchen for one discrete choice (a new model on every call, ~0.8 s)."""
     high = quality == "high"
     spec = km.build_spec(km.SceneOptions(fast_render=False, decimate_cell=None) if high else km.SceneOptions())
     textures.add_textures(spec)
     _add_side_cameras(spec)
     objects.add_microwave(spec, microwave)
     objects.add_kettle(spec, kettle)
-    _add_extra_lights(spec, num_lights, shadows=high)
-    return spec.compile()
+    _add_extra_lights(spec, MAX_EXTRA_LIGHTS, shadows=high)
+    model = spec.compile()
+    _base_arrays(microwave, kettle, quality, model)
+    return model
+
+
+_BASE: dict[tuple, dict[str, np.ndarray]] = {}
+
+
+def _base_arrays(microwave: int, kettle: int, quality: str, model: mujoco.MjModel | None = None) -> dict:
+    """The arrays of a freshly compiled variant that :func:`apply_domain` writes from (kB, kept per process)."""
+    key = (microwave, kettle, quality)
+    if key not in _BASE:
+        m = model if model is not None else compiled_variant(microwave, kettle, quality)
+        mw = m.body("microroot").id
+        _BASE[key] = {"mat_rgba": m.mat_rgba.copy(), "mat_texid": m.mat_texid.copy(),
+                      "mat_texrepeat": m.mat_texrepeat.copy(), "microwave_pos": m.body_pos[mw].copy(),
+                      "microwave_quat": m.body_quat[mw].copy()}
+    return _BASE[key]
 
 
 def _camera_quat(xyaxes: np.ndarray) -> np.ndarray:
@@ -191,15 +210,15 @@ def _camera_quat(xyaxes: np.ndarray) -> np.ndarray:
 
 def apply_domain(model: mujoco.MjModel, domain: Domain, quality: str = "fast") -> None:
     """Write the continuous parameters of ``domain`` into a compiled variant (in place)."""
-    base = compiled_variant(*domain.key, quality)
-    model.mat_rgba[:] = base.mat_rgba
-    model.mat_texid[:] = base.mat_texid
-    model.mat_texrepeat[:] = base.mat_texrepeat
+    base = _base_arrays(*domain.key, quality)
+    model.mat_rgba[:] = base["mat_rgba"]
+    model.mat_texid[:] = base["mat_texid"]
+    model.mat_texrepeat[:] = base["mat_texrepeat"]
     mw = model.body("microroot").id
     dx, dy, yaw = domain.microwave_pose
-    model.body_pos[mw] = base.body_pos[mw] + (dx, dy, 0.0)
+    model.body_pos[mw] = base["microwave_pos"] + (dx, dy, 0.0)
     turn = np.array([np.cos(yaw / 2), 0.0, 0.0, np.sin(yaw / 2)])
-    mujoco.mju_mulQuat(model.body_quat[mw], base.body_quat[mw], turn)
+    mujoco.mju_mulQuat(model.body_quat[mw], base["microwave_quat"], turn)
     for materials, rgba, skin in zip(SURFACES.values(), domain.colors, domain.textures, strict=True):
         for name in materials:
             i = model.material(name).id
@@ -212,6 +231,8 @@ def apply_domain(model: mujoco.MjModel, domain: Domain, quality: str = "fast") -
                     textures.texture_name(skin, flat)).id
                 if flat:
                     model.mat_texrepeat[i] = FLOOR_REPEAT * int(skin.split("@")[1])
+    for i in range(MAX_EXTRA_LIGHTS):
+        model.light_active[model.light(f"rand_light{i}").id] = i < len(domain.lights)
     for i, (d, diffuse) in enumerate(domain.lights):
         lid = model.light(f"rand_light{i}").id
         model.light_dir[lid] = d

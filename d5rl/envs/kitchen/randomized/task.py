@@ -64,7 +64,7 @@ class RandomizedKitchenEnv(KitchenEnv):
                             "use 'fast' (datasets) or 'high' (shadows and reflections, for figures)")
         self.quality = quality
         first = domain or Domain.sample(np.random.default_rng(0))
-        model = compiled_variant(*first.key, quality).__copy__()
+        model = compiled_variant(*first.key, quality)
         super().__init__(tasks=tasks, obs_mode=obs_mode, image_size=image_size, cameras=cameras,
                          init_noise=init_noise, render_mode=render_mode, render_size=render_size, model=model)
         self._fixed_domain = domain
@@ -74,15 +74,20 @@ class RandomizedKitchenEnv(KitchenEnv):
         apply_domain(self.model, first, quality)
 
     def set_domain(self, domain: Domain) -> None:
-        """Switch the scene to ``domain`` (recompiles only when a discrete choice changes; cached)."""
+        """Switch the scene to ``domain`` (recompiles only when a discrete choice changes).
+
+        An environment that has made a renderer keeps each variant it visited with its renderers
+        (at most 32 models of ~40 MB): closing an EGL renderer and opening another one rendered
+        wrong images (measured), and reuse saves the GL upload.  One that never rendered (state
+        observations, dataset generation) keeps only its current model and compiles on a switch.
+        """
         if domain.key != self.domain.key:
-            # Renderers are kept per variant: closing an EGL renderer and opening another one
-            # rendered wrong images (measured), and reusing them also saves the GL upload.
-            self._variants[self.domain.key] = (self.model, self.data, self._renderers)
+            if self._renderers:
+                self._variants[self.domain.key] = (self.model, self.data, self._renderers)
             if domain.key in self._variants:
                 self.model, self.data, self._renderers = self._variants.pop(domain.key)
             else:
-                self.model = compiled_variant(*domain.key, self.quality).__copy__()
+                self.model = compiled_variant(*domain.key, self.quality)
                 self.data = mujoco.MjData(self.model)
                 self._renderers = {}
         apply_domain(self.model, domain, self.quality)
