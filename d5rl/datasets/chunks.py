@@ -168,22 +168,30 @@ class CompressedArray:
         if isinstance(idx, slice):
             start, stop, step = idx.indices(len(self))
             return self[np.arange(start, stop, step)]
-        idx = np.asarray(idx)
-        if idx.dtype == bool:
-            idx = np.flatnonzero(idx)
-        flat = idx.reshape(-1).astype(np.int64)
-        if flat.size and (flat.min() < 0 or flat.max() >= len(self)):
-            raise IndexError(f"index out of range for length {len(self)}")
-        out = np.empty((flat.size, *self.row_shape), self.dtype)
-        which = np.searchsorted(self.row_starts, flat, side="right") - 1
-        order = np.argsort(which, kind="stable")
-        w = which[order]
-        cuts = np.flatnonzero(np.diff(w)) + 1
-        for sel in np.split(order, cuts):
-            if sel.size:
-                c = int(which[sel[0]])
-                out[sel] = self.chunk(c)[flat[sel] - self.row_starts[c]]
-        return out.reshape(idx.shape + self.row_shape)
+        return gather_rows(idx, len(self), self.row_shape, self.dtype, self.row_starts, self.chunk)
+
+
+def gather_rows(idx, length: int, row_shape: tuple, dtype, bounds: np.ndarray, chunk) -> np.ndarray:
+    """Rows ``idx`` (an integer or boolean index array) of an array stored as consecutive chunks:
+    chunk ``c`` holds rows ``bounds[c]:bounds[c + 1]`` and ``chunk(c)`` returns it; each chunk a batch
+    needs is read once.  Shared by compressed arrays and the shard-concatenating ``ChunkedArray``."""
+    idx = np.asarray(idx)
+    if idx.dtype == bool:
+        idx = np.flatnonzero(idx)
+    flat = idx.reshape(-1).astype(np.int64)
+    if flat.size and (flat.min() < 0 or flat.max() >= length):
+        raise IndexError(f"index out of range for length {length}")
+    out = np.empty((flat.size, *row_shape), dtype)
+    if len(bounds) == 2:  # one chunk: gather straight into the output
+        np.take(chunk(0), flat, axis=0, out=out)
+        return out.reshape(idx.shape + tuple(row_shape))
+    which = np.searchsorted(bounds, flat, side="right") - 1
+    order = np.argsort(which, kind="stable")
+    edges = np.searchsorted(which[order], np.arange(len(bounds)))
+    for c in np.flatnonzero(edges[1:] > edges[:-1]):
+        sel = order[edges[c]: edges[c + 1]]
+        out[sel] = chunk(int(c))[flat[sel] - bounds[c]]
+    return out.reshape(idx.shape + tuple(row_shape))
 
 
 class CorruptChunkError(DatasetCorruptError):

@@ -15,6 +15,7 @@ from typing import Any, Iterator, Mapping
 
 import numpy as np
 
+from d5rl.datasets.chunks import gather_rows
 from d5rl.datasets.episode import Episode
 from d5rl.errors import DatasetCorruptError
 
@@ -35,6 +36,7 @@ class ChunkedArray:
         lens = np.array([len(c) for c in chunks], dtype=np.int64)
         self.starts = np.concatenate([[0], np.cumsum(lens)[:-1]])
         self.ends = np.cumsum(lens)
+        self.bounds = np.concatenate([[0], self.ends])
         self.dtype = chunks[0].dtype
         self.shape = (int(self.ends[-1]),) + tuple(chunks[0].shape[1:])
 
@@ -69,23 +71,7 @@ class ChunkedArray:
             parts += [self.chunks[c] for c in range(c0 + 1, c1)]
             parts.append(self.chunks[c1][: stop - self.starts[c1]])
             return np.concatenate(parts, axis=0)
-        idx = np.asarray(idx)
-        if idx.dtype == bool:
-            idx = np.flatnonzero(idx)
-        flat = idx.reshape(-1).astype(np.int64)
-        if flat.size and (flat.min() < 0 or flat.max() >= len(self)):
-            raise IndexError(f"index out of range for length {len(self)}")
-        out = np.empty((flat.size,) + self.shape[1:], self.dtype)
-        if len(self.chunks) == 1 and isinstance(self.chunks[0], np.ndarray):
-            np.take(self.chunks[0], flat, axis=0, out=out)
-            return out.reshape(idx.shape + self.shape[1:])
-        which = np.searchsorted(self.ends, flat, side="right")
-        order = np.argsort(which, kind="stable")
-        bounds = np.searchsorted(which[order], np.arange(len(self.chunks) + 1))
-        for c in np.flatnonzero(bounds[1:] > bounds[:-1]):
-            sel = order[bounds[c]: bounds[c + 1]]
-            out[sel] = self.chunks[c][flat[sel] - self.starts[c]]
-        return out.reshape(idx.shape + self.shape[1:])
+        return gather_rows(idx, len(self), self.shape[1:], self.dtype, self.bounds, self.chunks.__getitem__)
 
 
 class Dataset:
