@@ -10,7 +10,7 @@ from pathlib import Path
 
 import numpy as np
 
-from d5rl.envs.a1.experts import POLICY_DIR
+from d5rl.envs.a1.agents import POLICY_DIR
 from d5rl.errors import D5RLError
 
 
@@ -20,7 +20,7 @@ def agent_log(agent: str, policy_dir: str = str(POLICY_DIR)) -> dict:
     if not path.exists():
         raise D5RLError(
             f"the A1 data-collecting agent {agent!r} has no policy snapshots ({path} is missing)",
-            f"train it: `python -m d5rl.envs.a1.experts --agent {agent}` (needs the `train` extra)",
+            f"train it: `python -m d5rl.envs.a1.experts train --agents {agent}` (needs the `train` extra)",
         )
     return json.loads(path.read_text())
 

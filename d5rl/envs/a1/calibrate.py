@@ -15,7 +15,7 @@ from pathlib import Path
 
 import numpy as np
 
-from d5rl.envs.a1.experts import POLICY_DIR
+from d5rl.envs.a1.agents import POLICY_DIR
 from d5rl.envs.a1.policy import SnapshotPolicy
 from d5rl.registry import get_spec, make_env
 

@@ -16,7 +16,7 @@ import numpy as np
 from d5rl.datasets.episode import Episode
 from d5rl.envs.a1 import rewards
 from d5rl.envs.a1.buffers import agent_log, episode_table
-from d5rl.envs.a1.experts import AGENTS, EPISODE_STEPS, POLICY_DIR
+from d5rl.envs.a1.agents import AGENTS, EPISODE_STEPS, POLICY_DIR, make_env
 from d5rl.envs.a1.policy import SnapshotPolicy
 from d5rl.errors import D5RLError
 
@@ -36,10 +36,7 @@ class ReplayBufferGenerator:
 
     def _env(self, agent):
         if agent not in self._envs:
-            from d5rl.envs.a1.task import A1Env
-
-            speed, command = AGENTS[agent]
-            self._envs[agent] = A1Env(target_speed=speed, command=command)
+            self._envs[agent] = make_env(agent)
         return self._envs[agent]
 
     def _policy(self, agent, seg_i):
@@ -83,7 +80,7 @@ class ReplayBufferGenerator:
             **{f"infos/{k}": np.asarray(v, np.float32) for k, v in infos.items()},
         }
         seg = agent_log(agent)["segments"][seg_i]
-        meta = {"agent": agent, "agent_target_speed": AGENTS[agent][0], "segment": seg_i,
+        meta = {"agent": agent, "agent_target_speed": AGENTS[agent].target_speed, "segment": seg_i,
                 "snapshot": seg["snapshot"] or "random", "training_step": seg["start_step"]}
         return Episode(arrays, meta)
 

@@ -7,14 +7,18 @@ import d5rl
 from d5rl.datasets.generation import episode_rng, make_generator
 from d5rl.envs.a1 import data
 from d5rl.envs.a1.calibrate import evaluate
-from d5rl.envs.a1.experts import AGENTS, POLICY_DIR
+from d5rl.envs.a1.agents import AGENTS, POLICY_DIR
 from d5rl.envs.a1.policy import SnapshotPolicy
 
 
 
-def test_policy_snapshots_ship_with_the_package():
-    for agent in AGENTS:
-        assert (POLICY_DIR / agent / "log.json").exists() and (POLICY_DIR / agent / "final.npz").exists(), agent
+def test_data_agents_policies_ship_with_the_package():
+    # (reference agents ship their final policy once trained; `calibrate.CANDIDATES` lists the shipped ones)
+    for agent in (a for a, spec in AGENTS.items() if spec.role == "data"):
+        log = POLICY_DIR / agent / "log.json"
+        assert log.exists() and (POLICY_DIR / agent / "final.npz").exists(), agent
+        for seg in data.agent_log(agent)["segments"]:
+            assert seg["snapshot"] is None or (POLICY_DIR / agent / seg["snapshot"]).exists(), (agent, seg)
 
 
 def _first_index_of(gen, agent, learned=True):
@@ -63,8 +67,8 @@ def test_hiking_relabel_matches_heading_agent_reward():
 @pytest.mark.slow
 @pytest.mark.parametrize("agent", ["speed-0.5", "speed-0.8", "speed-1.0"])
 def test_final_expert_tracks_its_speed(agent):
-    target, _ = AGENTS[agent]
-    from d5rl.envs.a1.experts import make_env
+    target = AGENTS[agent].target_speed
+    from d5rl.envs.a1.agents import make_env
 
     env = make_env(agent)
     policy = SnapshotPolicy(POLICY_DIR / agent / "final.npz")

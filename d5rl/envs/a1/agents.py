@@ -1,0 +1,60 @@
+"""The A1 agents: what each is trained to do and what it is for (light: no JAX, no MuJoCo at import).
+
+Data agents' replay buffers are the A1 datasets; reference agents define score references.
+Training: :mod:`d5rl.envs.a1.experts`; their policies live in ``policies/<agent>/``.
+"""
+
+from __future__ import annotations
+
+import dataclasses
+from pathlib import Path
+
+from d5rl.envs.a1 import rewards
+
+POLICY_DIR = Path(__file__).with_name("policies")
+EPISODE_STEPS = 400
+
+
+@dataclasses.dataclass(frozen=True)
+class AgentSpec:
+    """One agent: what it is trained to do and what it is for."""
+
+    target_speed: float  # m/s
+    command: str = "forward"  # A1Env command: forward | heading | waypoints
+    terrain: str = "flat"  # A1Env terrain: flat | course
+    role: str = "data"  # "data": its replay buffer is a dataset; "reference": defines a score reference only
+    band: tuple[float, float] = (0.0, 0.03)  # full speed reward in [target + band[0], target + band[1]] m/s
+    episode_steps: int = EPISODE_STEPS
+
+    @property
+    def obs_dim(self) -> int:
+        return 58 if self.command == "forward" else 60
+
+
+AGENTS = {
+    # the data-collecting agents of a1-locomotion (walk / run) and a1-hiking, as in the paper
+    "speed-0.5": AgentSpec(0.5),
+    "speed-0.8": AgentSpec(0.8),
+    "speed-1.0": AgentSpec(1.0),
+    "heading": AgentSpec(0.75, "heading"),  # flat ground, a heading command that turns every 100 steps
+    # score references only (not in any dataset)
+    "run-1.25": AgentSpec(1.25, role="reference"),  # a1-run-v0: really runs at 1.25 m/s
+    "hiking": AgentSpec(0.75, "waypoints", "course", role="reference", band=(-0.1, 0.1), episode_steps=1000),
+}
+
+
+def make_env(agent: str):
+    from d5rl.envs.a1.task import A1Env
+
+    spec = AGENTS[agent]
+    return A1Env(target_speed=spec.target_speed, terrain=spec.terrain, command=spec.command)
+
+
+def training_reward(spec: AgentSpec, info: dict) -> float:
+    """The agent's training reward from the env's reward terms (the task reward with ``spec.band``)."""
+    lo, hi = spec.target_speed + spec.band[0], spec.target_speed + spec.band[1]
+    speed = rewards.tolerance(info["forward_speed"], lo, hi, spec.target_speed, "linear") * info["standing"]
+    if spec.command == "forward":
+        return float(rewards.SPEED_REWARD_SCALE * speed - rewards.ENERGY_COEF * info["energy"])
+    return float(rewards.SPEED_REWARD_SCALE * speed * rewards.heading_term(info["heading_error"])
+                 - rewards.HIKING_ENERGY_COEF * info["energy"])

@@ -1,0 +1,108 @@
+"""The A1 agents' trainer: training reward, snapshots and logs, exact resume."""
+
+import json
+
+import numpy as np
+import pytest
+
+from d5rl.envs.a1 import rewards
+from d5rl.envs.a1.agents import AGENTS, AgentSpec, make_env, training_reward
+
+pytest.importorskip("jax")
+
+
+def test_training_reward_with_the_task_band_is_the_task_reward():
+    for agent in ("speed-0.8", "heading"):
+        env = make_env(agent)
+        env.reset(seed=3)
+        spec = AGENTS[agent]
+        task_band = AgentSpec(spec.target_speed, spec.command, spec.terrain, band=(-0.1, 0.1))
+        rng = np.random.default_rng(0)
+        for _ in range(30):
+            _, r, term, _, info = env.step(rng.uniform(-1, 1, 12))
+            assert training_reward(task_band, info) == pytest.approx(r, abs=1e-9)
+            if term:
+                break
+
+
+def test_narrow_band_rewards_the_target_not_the_slow_edge():
+    spec = AGENTS["speed-1.0"]
+    info = {"standing": 1.0, "energy": 0.0}
+    at_target = training_reward(spec, {**info, "forward_speed": 1.0})
+    slow_edge = training_reward(spec, {**info, "forward_speed": 0.9})
+    assert at_target == pytest.approx(rewards.SPEED_REWARD_SCALE)
+    # the task's reward is flat down to 0.9 m/s; the training reward falls by 0.1 / margin (1.0) there
+    assert slow_edge == pytest.approx(rewards.SPEED_REWARD_SCALE * 0.9)
+    assert rewards.speed_term(0.9, 1.0) == 1.0
+
+
+def _train(tmp_path, name, max_minutes=None):
+    from d5rl.envs.a1.experts import Trainer
+
+    t = Trainer(["speed-0.5", "run-1.25"], steps=90, seed=0, snapshot_every=30, start_steps=30, utd=1,
+                work_dir=tmp_path / name / "work", policy_dir=tmp_path / name / "policies")
+    return t.run(max_minutes=max_minutes, log_every=10**9)
+
+
+def test_trainer_writes_snapshots_logs_and_resumes_bit_for_bit(tmp_path):
+    assert _train(tmp_path, "straight")
+    # the same run stopped at every snapshot boundary and resumed
+    stops = 0
+    while not _train(tmp_path, "resumed", max_minutes=0):
+        stops += 1
+    assert stops == 2  # boundaries at steps 30 and 60 (start_steps 30, snapshot_every 30)
+    for agent in ("speed-0.5", "run-1.25"):
+        a, b = tmp_path / "straight" / "policies" / agent, tmp_path / "resumed" / "policies" / agent
+        assert sorted(p.name for p in a.iterdir()) == sorted(p.name for p in b.iterdir())
+        for f in a.glob("*.npz"):
+            with np.load(f) as x, np.load(b / f.name) as y:
+                assert x.files == y.files and all(np.array_equal(x[k], y[k]) for k in x.files), f.name
+        la, lb = json.loads((a / "log.json").read_text()), json.loads((b / "log.json").read_text())
+        assert la["segments"] == lb["segments"]
+    data = tmp_path / "straight" / "policies" / "speed-0.5"
+    log = json.loads((data / "log.json").read_text())
+    assert [s["snapshot"] for s in log["segments"]] == [None, "snapshot-01.npz", "snapshot-02.npz"]
+    assert [s["start_step"] for s in log["segments"]] == [0, 30, 60]
+    assert sum(s["steps"] for s in log["segments"]) == 90
+    # a reference agent saves snapshots too (a resume on another machine replays them)
+    assert sorted(p.name for p in (tmp_path / "straight" / "policies" / "run-1.25").glob("*.npz")) == [
+        "final.npz", "snapshot-01.npz", "snapshot-02.npz"]
+
+
+def test_exported_checkpoint_resumes_on_a_machine_without_the_buffer(tmp_path):
+    from d5rl.envs.a1.experts import Trainer, export
+    from d5rl.training.checkpoint import load_checkpoint
+
+    def trainer(work):
+        return Trainer(["speed-0.5", "run-1.25"], steps=90, seed=0, snapshot_every=30, start_steps=30, utd=1,
+                       work_dir=work / "speed-0.5+run-1.25", policy_dir=tmp_path / "policies",
+                       saved_root=tmp_path / "saved")
+
+    assert not trainer(tmp_path / "machine-a").run(max_minutes=0, log_every=10**9)  # stops at step 30
+    export(tmp_path / "machine-a", tmp_path / "saved")
+    full = load_checkpoint(tmp_path / "machine-a" / "speed-0.5+run-1.25")
+    saved = load_checkpoint(tmp_path / "saved" / "checkpoints" / "speed-0.5+run-1.25")
+    assert saved.buffer is None and saved.agent == full.agent and saved.state == full.state
+    assert not (tmp_path / "saved" / "checkpoints" / "speed-0.5+run-1.25" / "checkpoint.prev").exists()
+
+    b = trainer(tmp_path / "machine-b")  # no checkpoint of its own
+    learners = b._new_learners()
+    _, t, _, _, segments = b._load(learners)
+    assert t == 30 and [s.snapshot for s in segments[0]] == [None, "snapshot-01.npz"]
+    # the refilled buffer: 30 random-action steps per agent, chained observations, the training reward
+    for i in range(2):
+        acts = b.buf["actions"][i, :30]
+        assert np.all(np.abs(acts) <= 1) and np.abs(acts).sum() > 0 and not b.buf["actions"][i, 30:].any()
+        cont = b.buf["masks"][i, :29] > 0
+        same = np.all(b.buf["next_observations"][i, :29] == b.buf["observations"][i, 1:30], axis=1)
+        assert same[cont].all()  # equal except where an episode ended (a fall)
+    assert b.run(log_every=10**9)  # and training finishes from there
+    log = json.loads((tmp_path / "policies" / "speed-0.5" / "log.json").read_text())
+    assert [s["start_step"] for s in log["segments"]] == [0, 30, 60]
+
+
+def test_trainer_refuses_mixed_observation_sizes(tmp_path):
+    from d5rl.envs.a1.experts import Trainer
+
+    with pytest.raises(ValueError, match="observation sizes"):
+        Trainer(["speed-0.5", "heading"], 10, 0, 5, 5, 1, tmp_path)
