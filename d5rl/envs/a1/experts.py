@@ -22,16 +22,9 @@ there as a time-out) and a checkpoint is written to ``--work-dir`` (learners, re
 logs, RNG states; :mod:`d5rl.training.checkpoint`).  Running the same command again continues
 from it; ``--max-minutes`` stops at the first boundary after the budget.
 
-**Across machines.** Training takes longer than one sitting of a 2-core machine, and the replay
-buffers (~100 MB per agent) are too large to commit.  ``export`` copies each training's latest
-checkpoint *without* its buffer, and the final learners, to :data:`SAVED_DIR` (a few MB per
-agent; committed with the snapshots in ``SAVED_DIR/policies``).  ``train`` on a machine with no
-checkpoint in ``--work-dir`` resumes from there and refills each buffer by replaying every
-segment's snapshot for the steps it acted, as the dataset generator does: the learners,
-optimizer states and step counts are exact, the buffer has the same policies' transitions with
-fresh noise.
-
-    python -m d5rl.envs.a1.experts export     # at the end of a sitting; then commit experiments/a1-agents
+**Across machines** (training takes longer than one sitting of a 2-core machine): ``export``
+writes the checkpoints without their replay buffers to ``experiments/a1-agents`` for committing,
+and ``train`` resumes from there when ``--work-dir`` has none (:mod:`d5rl.envs.a1.resume`).
 
 **Training reward.** The tasks' rewards are flat within ±0.1 m/s of the target, and their energy
 term then pulls an agent to the slow edge (our first agents settled at 0.48 / 0.71 / 0.70 m/s for
@@ -51,9 +44,8 @@ from pathlib import Path
 import numpy as np
 
 from d5rl.envs.a1.agents import AGENTS, POLICY_DIR, make_env, training_reward
+from d5rl.envs.a1.resume import SAVED_DIR, WORK_DIR, export, refill_buffer
 
-WORK_DIR = Path("runs") / "a1-experts"  # full checkpoints (with replay buffers): this machine only
-SAVED_DIR = Path("experiments") / "a1-agents"  # committed: policies/, checkpoints/<agents>/, learners/
 
 
 def learner_config(utd: int):
@@ -191,33 +183,10 @@ class Trainer:
         else:
             print(f"[{'+'.join(self.names)}] {ckpt.path} has no replay buffer: refilling {t} steps per agent "
                   "by replaying the snapshots", flush=True)
-            self._refill_buffer(segments, t)
+            refill_buffer(self.buf, t, segments, self.names, self.envs, self.policy_dir, self.seed)
         rng = np.random.default_rng()
         rng.bit_generator.state = s["rng"]
         return flax.serialization.from_bytes(learners, ckpt.agent), t, rng, np.asarray(s["key"], np.uint32), segments
-
-    def _refill_buffer(self, segments, t: int) -> None:
-        """Replay each segment's acting policy for the steps it acted, with the training reward."""
-        from d5rl.envs.a1.policy import SnapshotPolicy
-
-        for i, (name, spec, env, segs) in enumerate(zip(self.names, self.specs, self.envs, segments)):
-            pos = 0
-            for j, seg in enumerate(segs):
-                rng = np.random.default_rng([self.seed, i, j])
-                policy = SnapshotPolicy(None if seg.snapshot is None else self.policy_dir / name / seg.snapshot)
-                obs, _ = env.reset(seed=int(rng.integers(2**31)))
-                length = 0
-                for _ in range(seg.steps):
-                    action = policy(obs, rng)
-                    o2, _, term, _, info = env.step(action)
-                    for key, v in (("observations", obs), ("actions", action), ("next_observations", o2),
-                                   ("rewards", training_reward(spec, info)), ("masks", 0.0 if term else 1.0)):
-                        self.buf[key][i, pos] = v
-                    pos, length, obs = pos + 1, length + 1, o2
-                    if term or length >= spec.episode_steps:
-                        (obs, _), length = env.reset(seed=int(rng.integers(2**31))), 0
-            if pos != t:
-                raise ValueError(f"{name}: the segments' steps add up to {pos}, the checkpoint is at step {t}")
 
     def _learner_file(self, agent: str) -> Path:
         """A finished agent's learner: this machine's, else the exported one."""
@@ -356,25 +325,6 @@ class Trainer:
             v = f"{np.mean(s.speeds[-5:]):.2f}" if s.speeds else "-"
             parts.append(f"{name}: R {r} v {v} falls {s.falls}")
         print(f"[{t}/{self.steps} {time.time() - t0:.0f}s] " + " | ".join(parts), flush=True)
-
-
-def export(work_root: Path = WORK_DIR, saved_root: Path = SAVED_DIR) -> None:
-    """Copy each training's latest checkpoint under ``work_root`` without its replay buffer, and the
-    finished agents' learners, to ``saved_root`` (see "Across machines" above)."""
-    import shutil
-
-    from d5rl.training.checkpoint import PREVIOUS, Checkpoint, load_checkpoint, save_checkpoint
-
-    for run in sorted(p.parent for p in Path(work_root).glob("*/checkpoint")):
-        ckpt = load_checkpoint(run)
-        dest = Path(saved_root) / "checkpoints" / "+".join(ckpt.state["agents"])
-        save_checkpoint(dest, Checkpoint(ckpt.agent, ckpt.state, None))
-        shutil.rmtree(dest / PREVIOUS, ignore_errors=True)
-        print(f"{run} (step {ckpt.state['t']}) -> {dest}")
-    for f in sorted((Path(work_root) / "learners").glob("*.msgpack")):
-        (Path(saved_root) / "learners").mkdir(parents=True, exist_ok=True)
-        shutil.copyfile(f, Path(saved_root) / "learners" / f.name)
-        print(f"{f} -> {Path(saved_root) / 'learners' / f.name}")
 
 
 def main(argv=None) -> None:

@@ -1,0 +1,63 @@
+"""A1 agent training across machines: checkpoints without replay buffers, and their refill.
+
+A full checkpoint (``WORK_DIR/<agents>/checkpoint``) holds the replay buffers, ~100 MB per agent:
+too large to commit.  :func:`export` writes each one without its buffer, plus the finished
+agents' learners, to :data:`SAVED_DIR` (committed with the snapshots in ``SAVED_DIR/policies``);
+a trainer with no checkpoint of its own resumes from there and :func:`refill_buffer` replays
+every segment's snapshot for the steps it acted, as the dataset generator does.
+"""
+
+from __future__ import annotations
+
+import shutil
+from pathlib import Path
+
+import numpy as np
+
+from d5rl.envs.a1.agents import AGENTS, training_reward
+
+WORK_DIR = Path("runs") / "a1-experts"  # full checkpoints (with replay buffers): this machine only
+SAVED_DIR = Path("experiments") / "a1-agents"  # committed: policies/, checkpoints/<agents>/, learners/
+
+
+def refill_buffer(buf: dict, t: int, segments, names, envs, policy_dir: Path, seed: int) -> None:
+    """Fill ``buf[key][i, :t]`` for agent ``names[i]`` by replaying each segment's acting policy
+    (its snapshot; uniform actions before learning) for the steps it acted, with the training reward."""
+    from d5rl.envs.a1.policy import SnapshotPolicy
+
+    for i, (name, env, segs) in enumerate(zip(names, envs, segments)):
+        spec, pos = AGENTS[name], 0
+        for j, seg in enumerate(segs):
+            rng = np.random.default_rng([seed, i, j])
+            policy = SnapshotPolicy(None if seg.snapshot is None else Path(policy_dir) / name / seg.snapshot)
+            obs, _ = env.reset(seed=int(rng.integers(2**31)))
+            length = 0
+            for _ in range(seg.steps):
+                action = policy(obs, rng)
+                nxt, _, term, _, info = env.step(action)
+                for key, v in (("observations", obs), ("actions", action), ("next_observations", nxt),
+                               ("rewards", training_reward(spec, info)), ("masks", 0.0 if term else 1.0)):
+                    buf[key][i, pos] = v
+                pos, length, obs = pos + 1, length + 1, nxt
+                if term or length >= spec.episode_steps:
+                    (obs, _), length = env.reset(seed=int(rng.integers(2**31))), 0
+        if pos != t:
+            raise ValueError(f"{name}: the segments' steps add up to {pos}, the checkpoint is at step {t}")
+
+
+def export(work_root: Path = WORK_DIR, saved_root: Path = SAVED_DIR) -> None:
+    """Copy each training's latest checkpoint under ``work_root`` without its replay buffer, and the
+    finished agents' learners, to ``saved_root``."""
+    from d5rl.training.checkpoint import PREVIOUS, Checkpoint, load_checkpoint, save_checkpoint
+
+    work_root, saved_root = Path(work_root), Path(saved_root)
+    for run in sorted(p.parent for p in work_root.glob("*/checkpoint")):
+        ckpt = load_checkpoint(run)
+        dest = saved_root / "checkpoints" / "+".join(ckpt.state["agents"])
+        save_checkpoint(dest, Checkpoint(ckpt.agent, ckpt.state, None))
+        shutil.rmtree(dest / PREVIOUS, ignore_errors=True)
+        print(f"{run} (step {ckpt.state['t']}) -> {dest}")
+    for f in sorted((work_root / "learners").glob("*.msgpack")):
+        (saved_root / "learners").mkdir(parents=True, exist_ok=True)
+        shutil.copyfile(f, saved_root / "learners" / f.name)
+        print(f"{f} -> {saved_root / 'learners' / f.name}")

@@ -1,0 +1,41 @@
+"""A1 training across machines: a checkpoint exported without its replay buffer resumes elsewhere."""
+
+import json
+
+import numpy as np
+import pytest
+
+pytest.importorskip("jax")
+
+
+def test_exported_checkpoint_resumes_on_a_machine_without_the_buffer(tmp_path):
+    from d5rl.envs.a1.experts import Trainer
+    from d5rl.envs.a1.resume import export
+    from d5rl.training.checkpoint import load_checkpoint
+
+    def trainer(work):
+        return Trainer(["speed-0.5", "run-1.25"], steps=90, seed=0, snapshot_every=30, start_steps=30, utd=1,
+                       work_dir=work / "speed-0.5+run-1.25", policy_dir=tmp_path / "policies",
+                       saved_root=tmp_path / "saved")
+
+    assert not trainer(tmp_path / "machine-a").run(max_minutes=0, log_every=10**9)  # stops at step 30
+    export(tmp_path / "machine-a", tmp_path / "saved")
+    full = load_checkpoint(tmp_path / "machine-a" / "speed-0.5+run-1.25")
+    saved = load_checkpoint(tmp_path / "saved" / "checkpoints" / "speed-0.5+run-1.25")
+    assert saved.buffer is None and saved.agent == full.agent and saved.state == full.state
+    assert not (tmp_path / "saved" / "checkpoints" / "speed-0.5+run-1.25" / "checkpoint.prev").exists()
+
+    b = trainer(tmp_path / "machine-b")  # no checkpoint of its own
+    learners = b._new_learners()
+    _, t, _, _, segments = b._load(learners)
+    assert t == 30 and [s.snapshot for s in segments[0]] == [None, "snapshot-01.npz"]
+    # the refilled buffer: 30 random-action steps per agent, chained observations, the training reward
+    for i in range(2):
+        acts = b.buf["actions"][i, :30]
+        assert np.all(np.abs(acts) <= 1) and np.abs(acts).sum() > 0 and not b.buf["actions"][i, 30:].any()
+        cont = b.buf["masks"][i, :29] > 0
+        same = np.all(b.buf["next_observations"][i, :29] == b.buf["observations"][i, 1:30], axis=1)
+        assert same[cont].all()  # equal except where an episode ended (a fall)
+    assert b.run(log_every=10**9)  # and training finishes from there
+    log = json.loads((tmp_path / "policies" / "speed-0.5" / "log.json").read_text())
+    assert [s["start_step"] for s in log["segments"]] == [0, 30, 60]
