@@ -32,11 +32,15 @@ def test_episode_deterministic_and_rerender_matches_env(gen):
     assert ds.num_transitions == 500 and ds.episode_meta[0]["domain"] == a.meta["domain"]
 
 
-def test_play_never_contains_partial_set():
+def test_play_never_contains_partial_set_and_sizes_are_uniform():
     rng = np.random.default_rng(0)
-    for _ in range(300):
+    sizes = []
+    for _ in range(3000):
         s = rd.play_subtasks(rng)
         assert 2 <= len(s) <= 6 and len(set(s)) == len(s) and not set(PARTIAL) <= set(s)
+        sizes.append(len(s))
+    # each size 2..6 equally often (1/5 each; binomial sd ~0.007), so 4 subtasks on average
+    assert np.allclose(np.bincount(sizes, minlength=7)[2:] / len(sizes), 0.2, atol=0.03)
 
 
 def test_skilled_solves_more_than_novice(gen):

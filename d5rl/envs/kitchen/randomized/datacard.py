@@ -1,6 +1,6 @@
 """Statistics of the randomized-kitchen datasets and of the skilled operator, for the data card.
 
-    nice -n 5 python -m d5rl.envs.kitchen.randomized.datacard sample --episodes 40
+    nice -n 5 python -m d5rl.envs.kitchen.randomized.datacard sample --episodes 160 [--modes play]  # first N
     nice -n 5 python -m d5rl.envs.kitchen.randomized.datacard grasps --seeds 12    # per object model
     nice -n 5 python -m d5rl.envs.kitchen.randomized.datacard corners --seeds 8    # pose-range corners
     nice -n 5 python -m d5rl.envs.kitchen.randomized.datacard full                 # generated datasets
@@ -92,10 +92,12 @@ def corner_table(seeds: int) -> list[str]:
 
 
 def sample_stats(mode: str, episodes: int, seed: int = 0) -> dict:
+    """Statistics of the dataset's first ``episodes`` episodes, generated without frames (the same
+    episodes, byte for byte, as ``d5rl generate``'s: one generator per episode index and seed)."""
+    from d5rl.datasets.generation import episode_rng
+
     g = RandomizedKitchenGenerator(mode=mode)
-    root = np.random.SeedSequence(seed)
-    metas = [g.episode(i, np.random.default_rng(s)).meta for i, s in enumerate(root.spawn(episodes))]
-    return _stats(metas)
+    return _stats([g.episode(i, episode_rng(seed, i)).meta for i in range(episodes)])
 
 
 def _stats(metas: list[dict]) -> dict:
@@ -164,11 +166,12 @@ def main():
     p = argparse.ArgumentParser(description=__doc__.split("\n\n")[0])
     p.add_argument("what", choices=("sample", "grasps", "corners", "full", "frames"))
     p.add_argument("--episodes", type=int, default=10)
+    p.add_argument("--modes", nargs="+", choices=sorted(MODES), default=sorted(MODES), help="sample: which datasets")
     p.add_argument("--seeds", type=int, default=8)
     p.add_argument("--out", default="docs/img/kitchen-randomized-domains.png")
     a = p.parse_args()
     if a.what == "sample":
-        rows = stats_table({mode: sample_stats(mode, a.episodes) for mode in MODES})
+        rows = stats_table({f"{mode} (first {a.episodes})": sample_stats(mode, a.episodes) for mode in a.modes})
     elif a.what == "grasps":
         rows = grasp_table(a.seeds)
     elif a.what == "corners":
