@@ -1,16 +1,19 @@
 """Train the A1 agents: the data-collecting agents and the score-reference experts.
 
-    python -m d5rl.envs.a1.experts train --agents speed-0.5 speed-0.8 speed-1.0 run-1.25 --steps 150000
-    python -m d5rl.envs.a1.experts train --agents heading --steps 150000
-    python -m d5rl.envs.a1.experts train --agents hiking --init-from heading --steps 60000
+    python -m d5rl.envs.a1.experts train --agents speed-0.5 speed-1.0 --steps 205000 --snapshot-every 20000
+    python -m d5rl.envs.a1.experts train --agents heading --steps 205000 --snapshot-every 20000
+    python -m d5rl.envs.a1.experts train --agents hiking --init-from heading --steps 65000 --snapshot-every 20000
     python -m d5rl.envs.a1.experts check                 # the speed bar of every agent's final policy
+    python -m d5rl.envs.a1.experts export                # between machines (see below)
+
+(the commands as run, one process per core: ``docs/datacards/a1.md``).
 
 Every agent is SAC with a pair of LayerNorm critics at an update-to-data ratio of 2 (our
 ``rlpd`` learner without offline data).  Agents with the same observation size train in one
 process: their learners are stacked and one vmapped, jitted call per environment step updates
 all of them and samples their next actions, while their environments step on the host.
 
-Along training each data agent's actor is saved at every snapshot boundary
+Along training each agent's actor is saved at every snapshot boundary
 (``policies/<agent>/snapshot-XX.npz``) and ``policies/<agent>/log.json`` records, per
 snapshot, the episodes and steps it collected.  The dataset generator replays these snapshots
 for the same number of episodes, which reproduces the agent's replay buffer from first
@@ -45,7 +48,6 @@ import numpy as np
 
 from d5rl.envs.a1.agents import AGENTS, POLICY_DIR, make_env, training_reward
 from d5rl.envs.a1.resume import SAVED_DIR, WORK_DIR, export, refill_buffer
-
 
 
 def learner_config(utd: int):
