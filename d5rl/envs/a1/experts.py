@@ -175,8 +175,8 @@ class Trainer:
         mine = {"agents": self.names, "seed": self.seed, "utd": self.utd, "snapshot_every": self.snapshot_every,
                 "start_steps": self.start_steps}
         if {k: s[k] for k in mine} != mine:
-            raise ValueError(f"{self.work_dir} holds another training run ({ {k: s[k] for k in mine} }); "
-                             "pass another --work-dir or delete it")
+            raise ValueError(f"{ckpt.path} holds another training run ({ {k: s[k] for k in mine} }); "
+                             "pass another --work-dir / --saved-dir or delete it")
         t = int(s["t"])
         segments = [[Segment(**d) for d in segs] for segs in s["segments"]]
         if ckpt.buffer:
