@@ -1,7 +1,8 @@
 """Train the A1 agents: the data-collecting agents and the score-reference experts.
 
-    python -m d5rl.envs.a1.experts train --agents speed-0.5 speed-1.0 --steps 205000 --snapshot-every 20000
-    python -m d5rl.envs.a1.experts train --agents heading --steps 205000 --snapshot-every 20000
+    python -m d5rl.envs.a1.experts train --agents speed-0.5 speed-1.0 --steps 203750 --snapshot-every 20000 \
+        --first-segment 1250
+    python -m d5rl.envs.a1.experts train --agents heading --steps 145000 --snapshot-every 20000
     python -m d5rl.envs.a1.experts train --agents hiking --init-from heading --steps 65000 --snapshot-every 20000
     python -m d5rl.envs.a1.experts check                 # the speed bar of every agent's final policy
     python -m d5rl.envs.a1.experts export                # between machines (see below)
@@ -15,7 +16,9 @@ all of them and samples their next actions, while their environments step on the
 
 Along training each agent's actor is saved at every snapshot boundary
 (``policies/<agent>/snapshot-XX.npz``) and ``policies/<agent>/log.json`` records, per
-snapshot, the episodes and steps it collected.  The dataset generator replays these snapshots
+snapshot, the episodes and steps it collected.  Segments start short (``--first-segment``) and
+double up to ``--snapshot-every``: the policy changes fastest early on, and a segment's steps are
+replayed by the snapshot at its start.  The dataset generator replays these snapshots
 for the same number of episodes, which reproduces the agent's replay buffer from first
 exploration to expert without re-running RL on every user's machine.  Reference agents
 (``role="reference"``) only define a score reference: only their final policy ships.
@@ -47,7 +50,18 @@ from pathlib import Path
 import numpy as np
 
 from d5rl.envs.a1.agents import AGENTS, POLICY_DIR, make_env, training_reward
-from d5rl.envs.a1.resume import SAVED_DIR, WORK_DIR, export, refill_buffer
+from d5rl.envs.a1.resume import SAVED_DIR, WORK_DIR, export, record, refill_buffer
+
+
+def boundaries(start_steps: int, first_segment: int, snapshot_every: int, steps: int) -> frozenset[int]:
+    """Snapshot boundaries: learning starts at ``start_steps``; the first learning segment is
+    ``first_segment`` steps and each next one twice the last, up to ``snapshot_every`` (the policy
+    changes fastest early, and each segment's data is replayed by the snapshot that starts it)."""
+    out, t, length = set(), start_steps, first_segment
+    while t <= steps:
+        out.add(t)
+        t, length = t + length, min(2 * length, snapshot_every)
+    return frozenset(out)
 
 
 def learner_config(utd: int):
@@ -80,7 +94,7 @@ class Trainer:
 
     def __init__(self, agents: list[str], steps: int, seed: int, snapshot_every: int, start_steps: int, utd: int,
                  work_dir: Path, policy_dir: Path = SAVED_DIR / "policies", init_from: str | None = None,
-                 saved_root: Path | None = None):
+                 saved_root: Path | None = None, first_segment: int | None = None):
         import jax
 
         dims = {AGENTS[a].obs_dim for a in agents}
@@ -89,6 +103,8 @@ class Trainer:
         self.names, self.specs = list(agents), [AGENTS[a] for a in agents]
         self.steps, self.seed, self.utd = int(steps), int(seed), int(utd)
         self.snapshot_every, self.start_steps = int(snapshot_every), int(start_steps)
+        self.first_segment = int(first_segment or snapshot_every)
+        self.boundaries = boundaries(self.start_steps, self.first_segment, self.snapshot_every, self.steps)
         self.work_dir, self.policy_dir, self.init_from = Path(work_dir), Path(policy_dir), init_from
         self.saved_root = None if saved_root is None else Path(saved_root)  # exported checkpoints (no buffers)
         self.config = learner_config(utd)
@@ -154,8 +170,8 @@ class Trainer:
         from d5rl.training.checkpoint import Checkpoint, save_checkpoint
 
         state = {"agents": self.names, "t": t, "steps": self.steps, "seed": self.seed, "utd": self.utd,
-                 "snapshot_every": self.snapshot_every, "start_steps": self.start_steps,
-                 "rng": rng.bit_generator.state, "key": np.asarray(key).tolist(),
+                 "snapshot_every": self.snapshot_every, "first_segment": self.first_segment,
+                 "start_steps": self.start_steps, "rng": rng.bit_generator.state, "key": np.asarray(key).tolist(),
                  "segments": [[dataclasses.asdict(s) for s in segs] for segs in segments]}
         buffer = {k: v[:, :t] for k, v in self.buf.items()}
         self.work_dir.mkdir(parents=True, exist_ok=True)
@@ -171,9 +187,9 @@ class Trainer:
             ckpt = load_checkpoint(self.saved_root / "checkpoints" / "+".join(self.names))
         if ckpt is None:
             return None
-        s = ckpt.state
+        s = {"first_segment": ckpt.state["snapshot_every"], **ckpt.state}  # (uniform segments before it was stored)
         mine = {"agents": self.names, "seed": self.seed, "utd": self.utd, "snapshot_every": self.snapshot_every,
-                "start_steps": self.start_steps}
+                "first_segment": self.first_segment, "start_steps": self.start_steps}
         if {k: s[k] for k in mine} != mine:
             raise ValueError(f"{ckpt.path} holds another training run ({ {k: s[k] for k in mine} }); "
                              "pass another --work-dir / --saved-dir or delete it")
@@ -202,7 +218,8 @@ class Trainer:
         for name, spec, segs in zip(self.names, self.specs, segments):
             log = {"agent": name, **{k: v for k, v in dataclasses.asdict(spec).items()}, "seed": self.seed,
                    "steps": t, "utd": self.utd, "start_steps": self.start_steps,
-                   "snapshot_every": self.snapshot_every, "train_seconds": round(seconds),
+                   "snapshot_every": self.snapshot_every, "first_segment": self.first_segment,
+                   "train_seconds": round(seconds),
                    "trained_with": self.names, "config": self.config.to_dict(),
                    "segments": [s.summary() for s in segs]}
             out = self.policy_dir / name
@@ -255,9 +272,7 @@ class Trainer:
             for i, (env, spec) in enumerate(zip(self.envs, self.specs)):
                 o2, _, term, _, info = env.step(actions[i])
                 r = training_reward(spec, info)
-                for name, v in (("observations", obs[i]), ("actions", actions[i]), ("rewards", r),
-                                ("next_observations", o2), ("masks", 0.0 if term else 1.0)):
-                    self.buf[name][i, t] = v
+                record(self.buf, i, t, obs[i], actions[i], r, o2, term)
                 e = ep[i]
                 e["ret"] += r
                 e["speeds"].append(info["forward_speed"])
@@ -285,7 +300,7 @@ class Trainer:
         return True
 
     def _is_boundary(self, t: int) -> bool:
-        return t >= self.start_steps and (t - self.start_steps) % self.snapshot_every == 0
+        return t in self.boundaries
 
     def _reset_all(self, rng):
         return np.stack([env.reset(seed=int(rng.integers(2**31)))[0] for env in self.envs]).astype(np.float32)
@@ -336,7 +351,10 @@ def main(argv=None) -> None:
     q.add_argument("--agents", nargs="+", choices=sorted(AGENTS), required=True)
     q.add_argument("--steps", type=int, default=150_000, help="environment steps per agent")
     q.add_argument("--seed", type=int, default=0)
-    q.add_argument("--snapshot-every", type=int, default=15_000)
+    q.add_argument("--snapshot-every", type=int, default=15_000, help="the longest segment between snapshots")
+    q.add_argument("--first-segment", type=int,
+                   help="steps of the first learning segment; each next one doubles up to --snapshot-every "
+                        "(default: --snapshot-every, uniform segments)")
     q.add_argument("--start-steps", type=int, default=5_000, help="uniform random steps before learning")
     q.add_argument("--utd", type=int, default=2)
     q.add_argument("--init-from", choices=sorted(AGENTS), help="start from this agent's final learner")
@@ -364,7 +382,7 @@ def main(argv=None) -> None:
             configure_worker(single_thread=True)
         work = args.work_dir or WORK_DIR / "+".join(args.agents)
         Trainer(args.agents, args.steps, args.seed, args.snapshot_every, args.start_steps, args.utd, work,
-                args.policy_dir, args.init_from, args.saved_dir).run(args.max_minutes, args.log_every)
+                args.policy_dir, args.init_from, args.saved_dir, args.first_segment).run(args.max_minutes, args.log_every)
     elif args.cmd == "export":
         export(args.work_root, args.saved_dir)
     else:

@@ -20,6 +20,15 @@ WORK_DIR = Path("runs") / "a1-experts"  # full checkpoints (with replay buffers)
 SAVED_DIR = Path("experiments") / "a1-agents"  # committed: policies/, checkpoints/<agents>/, learners/
 
 
+def record(buf: dict, i: int, pos: int, obs, action, reward: float, next_obs, terminated: bool) -> None:
+    """Write agent ``i``'s transition at ``buf[key][i, pos]`` (the trainer's replay-buffer layout)."""
+    buf["observations"][i, pos] = obs
+    buf["actions"][i, pos] = action
+    buf["rewards"][i, pos] = reward
+    buf["next_observations"][i, pos] = next_obs
+    buf["masks"][i, pos] = 0.0 if terminated else 1.0
+
+
 def refill_buffer(buf: dict, t: int, segments, names, envs, policy_dir: Path, seed: int) -> None:
     """Fill ``buf[key][i, :t]`` for agent ``names[i]`` by replaying each segment's acting policy
     (its snapshot; uniform actions before learning) for the steps it acted, with the training reward."""
@@ -35,9 +44,7 @@ def refill_buffer(buf: dict, t: int, segments, names, envs, policy_dir: Path, se
             for _ in range(seg.steps):
                 action = policy(obs, rng)
                 nxt, _, term, _, info = env.step(action)
-                for key, v in (("observations", obs), ("actions", action), ("next_observations", nxt),
-                               ("rewards", training_reward(spec, info)), ("masks", 0.0 if term else 1.0)):
-                    buf[key][i, pos] = v
+                record(buf, i, pos, obs, action, training_reward(spec, info), nxt, term)
                 pos, length, obs = pos + 1, length + 1, nxt
                 if term or length >= spec.episode_steps:
                     (obs, _), length = env.reset(seed=int(rng.integers(2**31))), 0

@@ -69,6 +69,26 @@ def test_trainer_writes_snapshots_logs_and_resumes_bit_for_bit(tmp_path):
         "final.npz", "snapshot-01.npz", "snapshot-02.npz"]
 
 
+def test_snapshot_boundaries_double_from_the_first_segment():
+    from d5rl.envs.a1.experts import boundaries
+
+    assert sorted(boundaries(5000, 1250, 20000, 80000)) == [5000, 6250, 8750, 13750, 23750, 43750, 63750]
+    # uniform segments when the first is as long as the rest (the default)
+    assert sorted(boundaries(30, 30, 30, 90)) == [30, 60, 90]
+
+
+def test_trainer_snapshots_on_the_doubling_schedule(tmp_path):
+    from d5rl.envs.a1.experts import Trainer
+
+    policies = tmp_path / "policies"
+    Trainer(["speed-0.5"], steps=75, seed=0, snapshot_every=20, start_steps=30, utd=1, work_dir=tmp_path / "work",
+            policy_dir=policies, first_segment=5).run(log_every=10**9)
+    log = json.loads((policies / "speed-0.5" / "log.json").read_text())
+    assert [s["start_step"] for s in log["segments"]] == [0, 30, 35, 45, 65]
+    assert [s["steps"] for s in log["segments"]] == [30, 5, 10, 20, 10]
+    assert log["first_segment"] == 5
+
+
 def test_trainer_refuses_mixed_observation_sizes(tmp_path):
     from d5rl.envs.a1.experts import Trainer
 
