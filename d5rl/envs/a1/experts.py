@@ -4,7 +4,8 @@
         --first-segment 1250
     python -m d5rl.envs.a1.experts train --agents heading --steps 145000 --snapshot-every 20000
     python -m d5rl.envs.a1.experts train --agents hiking --init-from heading --steps 65000 --snapshot-every 20000
-    python -m d5rl.envs.a1.experts check                 # the speed bar of every agent's final policy
+    python -m d5rl.envs.a1.experts check --policy-dir experiments/a1-agents/policies   # the speed bar
+    python -m d5rl.envs.a1.experts publish               # ship them to d5rl/envs/a1/policies
     python -m d5rl.envs.a1.experts export                # between machines (see below)
 
 (the commands as run, one process per core: ``docs/datacards/a1.md``).
@@ -50,7 +51,7 @@ from pathlib import Path
 import numpy as np
 
 from d5rl.envs.a1.agents import AGENTS, POLICY_DIR, make_env, training_reward
-from d5rl.envs.a1.resume import SAVED_DIR, WORK_DIR, export, record, refill_buffer
+from d5rl.envs.a1.resume import SAVED_DIR, WORK_DIR, export, publish, record, refill_buffer
 
 
 def boundaries(start_steps: int, first_segment: int, snapshot_every: int, steps: int) -> frozenset[int]:
@@ -374,6 +375,11 @@ def main(argv=None) -> None:
     c.add_argument("--agents", nargs="+", choices=sorted(AGENTS), default=sorted(AGENTS))
     c.add_argument("--episodes", type=int, default=10)
     c.add_argument("--seed", type=int, default=0)
+    c.add_argument("--policy-dir", type=Path, default=POLICY_DIR,
+                   help=f"whose final policies (default: the shipped ones; {SAVED_DIR / 'policies'}: the trained ones)")
+    p = sub.add_parser("publish", help=f"ship finished agents' policies to {POLICY_DIR} (the datasets replay them)")
+    p.add_argument("--agents", nargs="+", choices=sorted(AGENTS), default=sorted(AGENTS))
+    p.add_argument("--policy-dir", type=Path, default=SAVED_DIR / "policies")
     args = ap.parse_args(argv)
     if args.cmd == "train":
         if args.single_thread:
@@ -385,10 +391,12 @@ def main(argv=None) -> None:
                 args.policy_dir, args.init_from, args.saved_dir, args.first_segment).run(args.max_minutes, args.log_every)
     elif args.cmd == "export":
         export(args.work_root, args.saved_dir)
+    elif args.cmd == "publish":
+        publish(args.agents, args.policy_dir)
     else:
         from d5rl.envs.a1.speedcheck import main as check
 
-        check(args.agents, args.episodes, args.seed)
+        check(args.agents, args.episodes, args.seed, args.policy_dir)
 
 
 if __name__ == "__main__":

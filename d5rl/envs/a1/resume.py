@@ -1,4 +1,5 @@
-"""A1 agent training across machines: checkpoints without replay buffers, and their refill.
+"""A1 agent training across machines (checkpoints without replay buffers, and their refill) and
+shipping the finished agents (:func:`publish`).
 
 A full checkpoint (``WORK_DIR/<agents>/checkpoint``) holds the replay buffers, ~100 MB per agent:
 too large to commit.  :func:`export` writes each one without its buffer, plus the finished
@@ -14,7 +15,7 @@ from pathlib import Path
 
 import numpy as np
 
-from d5rl.envs.a1.agents import AGENTS, training_reward
+from d5rl.envs.a1.agents import AGENTS, POLICY_DIR, training_reward
 
 WORK_DIR = Path("runs") / "a1-experts"  # full checkpoints (with replay buffers): this machine only
 SAVED_DIR = Path("experiments") / "a1-agents"  # committed: policies/, checkpoints/<agents>/, learners/
@@ -50,6 +51,26 @@ def refill_buffer(buf: dict, t: int, segments, names, envs, policy_dir: Path, se
                     (obs, _), length = env.reset(seed=int(rng.integers(2**31))), 0
         if pos != t:
             raise ValueError(f"{name}: the segments' steps add up to {pos}, the checkpoint is at step {t}")
+
+
+def publish(agents, trained_dir: Path = SAVED_DIR / "policies", dest: Path = POLICY_DIR) -> None:
+    """Ship finished agents: a data agent's snapshots, final policy and log (the dataset generator
+    replays them); a reference agent's final policy and log only.  Replaces what ``dest`` held."""
+    from d5rl.errors import D5RLError
+
+    for name in agents:
+        src = Path(trained_dir) / name
+        if not (src / "final.npz").exists():
+            raise D5RLError(f"{name} has not finished training ({src / 'final.npz'} is missing)",
+                            "train it to its --steps first (python -m d5rl.envs.a1.experts train ...)")
+    for name in agents:
+        src, out = Path(trained_dir) / name, Path(dest) / name
+        files = sorted(src.glob("*.npz")) if AGENTS[name].role == "data" else [src / "final.npz"]
+        shutil.rmtree(out, ignore_errors=True)
+        out.mkdir(parents=True)
+        for f in [*files, src / "log.json"]:
+            shutil.copyfile(f, out / f.name)
+        print(f"{src} -> {out} ({len(files)} policies)")
 
 
 def export(work_root: Path = WORK_DIR, saved_root: Path = SAVED_DIR) -> None:

@@ -11,18 +11,22 @@ falls, and whether the agent meets the bar: mean speed within 5% of the target a
 
 from __future__ import annotations
 
+from pathlib import Path
+
 import numpy as np
+
+from d5rl.envs.a1.agents import POLICY_DIR
 
 BAR = 0.05  # relative speed error allowed
 
 
-def rollouts(agent: str, episodes: int, seed: int, deterministic: bool) -> dict:
+def rollouts(agent: str, episodes: int, seed: int, deterministic: bool, policy_dir: Path = POLICY_DIR) -> dict:
     """Per-episode mean forward speed, length and whether it fell, for an agent's final policy."""
-    from d5rl.envs.a1.agents import AGENTS, POLICY_DIR, make_env
+    from d5rl.envs.a1.agents import AGENTS, make_env
     from d5rl.envs.a1.policy import SnapshotPolicy
 
     spec = AGENTS[agent]
-    env, policy = make_env(agent), SnapshotPolicy(POLICY_DIR / agent / "final.npz")
+    env, policy = make_env(agent), SnapshotPolicy(Path(policy_dir) / agent / "final.npz")
     rng = np.random.default_rng(seed)
     speeds, lengths, falls = [], [], []
     for i in range(episodes):
@@ -41,13 +45,13 @@ def rollouts(agent: str, episodes: int, seed: int, deterministic: bool) -> dict:
     return {"speeds": speeds, "lengths": lengths, "falls": falls}
 
 
-def check(agent: str, episodes: int = 10, seed: int = 0) -> list[dict]:
+def check(agent: str, episodes: int = 10, seed: int = 0, policy_dir: Path = POLICY_DIR) -> list[dict]:
     from d5rl.envs.a1.agents import AGENTS
 
     target = AGENTS[agent].target_speed
     rows = []
     for mode in ("deterministic", "stochastic"):
-        r = rollouts(agent, episodes, seed, mode == "deterministic")
+        r = rollouts(agent, episodes, seed, mode == "deterministic", policy_dir)
         mean = float(np.mean(r["speeds"]))
         err = (mean - target) / target
         rows.append({"agent": agent, "mode": mode, "target": target, "mean_speed": mean,
@@ -56,10 +60,10 @@ def check(agent: str, episodes: int = 10, seed: int = 0) -> list[dict]:
     return rows
 
 
-def main(agents, episodes: int = 10, seed: int = 0) -> list[dict]:
-    rows = [row for a in agents for row in check(a, episodes, seed)]
-    print(f"{episodes} episodes per agent and mode, seeds {seed * 100_003}..; speed = mean forward speed over "
-          "whole episodes (m/s)\n")
+def main(agents, episodes: int = 10, seed: int = 0, policy_dir: Path = POLICY_DIR) -> list[dict]:
+    rows = [row for a in agents for row in check(a, episodes, seed, policy_dir)]
+    print(f"final policies in {policy_dir}, {episodes} episodes per agent and mode, seeds {seed * 100_003}..; "
+          "speed = mean forward speed over whole episodes (m/s)\n")
     print("| agent | policy | target | mean speed ± std over episodes | error | falls | within 5%, no falls |")
     print("|---|---|---:|---|---:|---:|:---:|")
     for r in rows:

@@ -39,3 +39,24 @@ def test_exported_checkpoint_resumes_on_a_machine_without_the_buffer(tmp_path):
     assert b.run(log_every=10**9)  # and training finishes from there
     log = json.loads((tmp_path / "policies" / "speed-0.5" / "log.json").read_text())
     assert [s["start_step"] for s in log["segments"]] == [0, 30, 60]
+
+
+def test_publish_ships_a_data_agents_snapshots_and_a_reference_agents_final_policy(tmp_path):
+    from d5rl.envs.a1.experts import Trainer
+    from d5rl.envs.a1.resume import publish
+    from d5rl.errors import D5RLError
+
+    trained, shipped = tmp_path / "policies", tmp_path / "shipped"
+    t = Trainer(["speed-0.5", "run-1.25"], steps=60, seed=0, snapshot_every=30, start_steps=30, utd=1,
+                work_dir=tmp_path / "work", policy_dir=trained)
+    assert not t.run(max_minutes=0, log_every=10**9)  # stopped at step 30: not finished
+    with pytest.raises(D5RLError, match="has not finished"):
+        publish(["speed-0.5"], trained, shipped)
+    assert not shipped.exists()
+    assert t.run(log_every=10**9)
+    (shipped / "speed-0.5").mkdir(parents=True)
+    (shipped / "speed-0.5" / "snapshot-07.npz").write_bytes(b"old")  # an older agent's snapshot goes
+    publish(["speed-0.5", "run-1.25"], trained, shipped)
+    assert sorted(p.name for p in (shipped / "speed-0.5").iterdir()) == ["final.npz", "log.json", "snapshot-01.npz"]
+    assert sorted(p.name for p in (shipped / "run-1.25").iterdir()) == ["final.npz", "log.json"]
+    assert (shipped / "speed-0.5" / "final.npz").read_bytes() == (trained / "speed-0.5" / "final.npz").read_bytes()
