@@ -60,9 +60,11 @@ def _env():
 def grasp_table(seeds: int) -> list[str]:
     rows = ["| object | model | handle (radius, half-length) m | mass kg | skilled operator, subtask alone |",
             "|---|---|---|---|---|"]
-    for k, m in enumerate(objects.KETTLES):
-        ok = sum(operator_solves("kettle", {"kettle": k}, s) for s in range(seeds))
-        rows.append(f"| kettle | {k}: {m.name} | bar across the top {m.handle_size} | {m.mass} | {ok} / {seeds} |")
+    for k, m in enumerate(objects.KETTLES):  # from each start site (the far one is the harder reach)
+        ok = [sum(operator_solves("kettle", {"kettle": k, "kettle_site": site}, s) for s in range(seeds))
+              for site in range(len(dm.KETTLE_SITES))]
+        per_site = ", ".join(f"site {site}: {n} / {seeds}" for site, n in enumerate(ok))
+        rows.append(f"| kettle | {k}: {m.name} | bar across the top {m.handle_size} | {m.mass} | {per_site} |")
     for k, m in enumerate(objects.MICROWAVES):
         ok = sum(operator_solves("microwave", {"microwave": k}, s) for s in range(seeds))
         rows.append(f"| microwave | {k}: {m.name} | vertical bar {m.handle_size} | door {m.door_mass} | {ok} / {seeds} |")
