@@ -136,3 +136,34 @@ def test_skilled_operator_moves_every_kettle_model_from_both_sites(kettle):
 
     for site in (0, 1):
         assert sum(operator_solves("kettle", {"kettle": kettle, "kettle_site": site}, s) for s in range(3)) >= 2
+
+
+@pytest.mark.parametrize("reseed", [True, False])
+def test_transit_to_the_far_kettle_is_resolved_when_the_rest_posture_solve_misses(reseed, monkeypatch):
+    """The tall kettle on the top-right burner (domain of datacard seed 0): inverse kinematics from
+    the rest posture alone ends 10-17 cm short with the base and elbow joints at their limits; the
+    re-solve from fixed seeds puts the hand within a few cm of the pre-grasp target."""
+    import dataclasses
+
+    import mujoco
+
+    from d5rl.envs.kitchen import demonstrator as dem
+    from d5rl.envs.kitchen.randomized import domain as dm
+    from d5rl.envs.kitchen.randomized.task import RandomizedKitchenEnv
+
+    if not reseed:
+        monkeypatch.setattr(dem, "IK_SEEDS", np.zeros((0, 7)))
+    rng = np.random.default_rng([7, 0])
+    domain = dataclasses.replace(dm.Domain.sample(rng), kettle=4, kettle_site=1)
+    env = RandomizedKitchenEnv(obs_mode="state")
+    env.reset(seed=0, options={"domain": domain})
+    policy = dem.Demonstrator(env, ["kettle"], rng, transit_first=True)
+    first = next(iter(dem.SCRIPTS["kettle"](policy.ctx)))
+    pos, rot = first.target(policy.ctx)
+    q = policy._transit_joints(pos, rot, first)
+    data = mujoco.MjData(env.model)
+    data.qpos[:] = env.data.qpos
+    data.qpos[:7] = q
+    mujoco.mj_kinematics(env.model, data)
+    miss = np.linalg.norm(data.site_xpos[env.model.site("end_effector").id] - pos)
+    assert (miss < 0.04) if reseed else (miss > 0.1)
