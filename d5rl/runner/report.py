@@ -9,6 +9,8 @@
   offline score;
 * ``table2_online.{md,csv}`` — Table 2, the same after online fine-tuning
   (cells run with ``online_steps > 0``);
+* ``table1_offline_vs_paper.md``, ``table2_online_vs_paper.md`` — each entry next to the paper's
+  (:mod:`d5rl.runner.paper`), for tasks the paper reports;
 * ``aggregate.{md,csv}`` — per method and table: IQM over all tasks and seeds
   with a 95 % stratified-bootstrap interval (:mod:`d5rl.runner.stats`), and the mean;
 * ``curves/<task>.png`` — learning curves (mean ± std over seeds per method);
@@ -157,6 +159,34 @@ def table_markdown(table: dict, title: str) -> str:
     return "\n".join(lines) + "\n"
 
 
+def comparison_markdown(table: dict, phase: str, title: str) -> str | None:
+    """Our table next to the paper's: each entry "ours / paper" (mean ± std), None if the paper has no row."""
+    from d5rl.runner.paper import paper_result, paper_task
+
+    algos = _method_order({a for _, a in table})
+    rows = [r for r in _table_rows(table, algos) if any(paper_result(r[1], a, phase) for a in algos)]
+    if not rows:
+        return None
+    lines = [f"### {title}: ours / paper", "",
+             "Each entry: this run's mean ± std over seeds / the paper's (500k steps per phase, its own data "
+             "and score references; its kitchen and WidowX agents see cameras, so a `-state` task is compared "
+             "with its camera task's row). `-`: not run here, or not in the paper.", "",
+             "| Environment | Task | " + " | ".join(method_name(a) for a in algos) + " |",
+             "|---|---|" + "---|" * len(algos)]
+    prev = None
+    for env, task, entries in rows:
+        cells = []
+        for a in algos:
+            e, p = entries[a], paper_result(task, a, phase)
+            ours = "-" if e is None else f"{_fmt(e[0])} ± {_fmt(e[1])}"
+            paper = "-" if p is None else _fmt(p[0]) + ("" if p[1] is None else f" ± {_fmt(p[1])}")
+            cells.append(f"{ours} / {paper}")
+        label = task if paper_task(task) == task else f"{task} (paper: {paper_task(task)})"
+        lines.append(f"| {env if env != prev else ''} | {label} | " + " | ".join(cells) + " |")
+        prev = env
+    return "\n".join(lines) + "\n"
+
+
 def table_csv(table: dict) -> str:
     algos = _method_order({a for _, a in table})
     buf = io.StringIO()
@@ -297,6 +327,10 @@ def write_report(run_dir: Path | str, out_dir: Path | str | None = None, reps: i
         agg = aggregate(table, reps=reps, seed=seed)
         agg_rows += aggregate_csv(agg, name)
         parts += [md, aggregate_markdown(agg, f"Aggregate ({title.split(': ')[1]})", reps)]
+        vs = comparison_markdown(table, phase, title)
+        if vs:
+            (out / f"{name}_vs_paper.md").write_text(vs)
+            parts.append(vs)
     if not agg_rows:
         raise ReportError(f"no finished cell under {run_dir} has evaluations",
                           "check the cells' log.txt / error.txt, then resume with the same `d5rl bench` command")

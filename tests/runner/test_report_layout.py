@@ -51,3 +51,26 @@ def test_paper_layout_and_numbers(tmp_path):
             assert float(online[task][f"{algo}_mean"]) == pytest.approx(np.mean(vals), abs=1e-12)
     agg = (tmp_path / "report" / "aggregate.md").read_text()
     assert "| BC | Locomotion | 2 | 6 |" in agg and "| IQL | all | 5 | 15 |" in agg
+
+
+def test_tables_next_to_the_papers(tmp_path):
+    truth = _fake_run(tmp_path, np.random.default_rng(1))
+    write_report(tmp_path, reps=50, plots=False)
+    md = (tmp_path / "report" / "table1_offline_vs_paper.md").read_text()
+    row = next(line for line in md.splitlines() if "| kitchen-standard-mixed-v0 |" in line)
+    cells = [c.strip() for c in row.split("|")[3:-1]]  # BC IQL TD3+BC IDQL myalgo
+    bc = [truth[("kitchen-standard-mixed-v0", "bc", s)][0] for s in range(3)]
+    assert cells[0] == f"{np.mean(bc):.3f} ± {np.std(bc):.3f} / 0.461 ± 0.124"
+    assert cells[4].endswith("/ -")  # not in the paper
+    wx = next(line for line in md.splitlines() if "| wx-sorting-v0 |" in line)
+    assert wx.split("|")[6].strip().endswith("/ 0.173")  # IDQL: the paper prints no ±
+    online = (tmp_path / "report" / "table2_online_vs_paper.md").read_text()
+    assert "0.935 ± 0.017" in online  # a1-walk IQL after fine-tuning
+
+
+def test_a_state_twin_is_compared_with_its_camera_task():
+    from d5rl.runner.paper import paper_result
+
+    assert paper_result("kitchen-randomized-partial-state-v0", "ddpm_bc", "offline") == (0.044, 0.010)
+    assert paper_result("wx-sorting-state-v0", "rlpd", "offline") is None  # "-" in the paper
+    assert paper_result("toy-reach-v0", "bc", "offline") is None
