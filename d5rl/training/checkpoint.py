@@ -170,9 +170,19 @@ def load_checkpoint(run_dir: str | Path, warn=None) -> Checkpoint | None:
 
 def restore_agent(agent, ckpt: Checkpoint):
     """``agent.from_bytes`` with a one-line error when the saved agent does not fit this one."""
+    import jax
+
+    hint = "the run's config.json, data and checkpoint disagree; start a new --run-dir"
     try:
-        return agent.from_bytes(ckpt.agent)
+        restored = agent.from_bytes(ckpt.agent)
     except Exception as e:  # noqa: BLE001 - msgpack/flax raise many types for a mismatched tree
         raise CheckpointError(f"{ckpt.path / 'agent.msgpack'} does not fit this agent ({e.__class__.__name__}: "
-                              f"{str(e).splitlines()[0][:160] if str(e) else ''})",
-                              "the run's config.json and the checkpoint disagree; start a new --run-dir") from None
+                              f"{str(e).splitlines()[0][:160] if str(e) else ''})", hint) from None
+    # flax restores arrays of any shape into the tree: a checkpoint of another observation size
+    # would only fail deep inside the first update
+    for (path, new), old in zip(jax.tree_util.tree_leaves_with_path(restored), jax.tree_util.tree_leaves(agent)):
+        if np.shape(new) != np.shape(old):
+            raise CheckpointError(f"{ckpt.path / 'agent.msgpack'} does not fit this agent: "
+                                  f"{jax.tree_util.keystr(path)} has shape {np.shape(new)}, this agent's "
+                                  f"{np.shape(old)} (another observation or action size?)", hint)
+    return restored
