@@ -117,7 +117,7 @@ def _parse_size(text: str) -> tuple[int, int]:
 
 
 def cmd_render(args) -> int:
-    from tqdm.auto import tqdm
+    from d5rl.progress import progress_bar
 
     from d5rl.registry import get_spec, make_env
     from d5rl.video import replay_frames, rollout_frames, write_video
@@ -146,7 +146,7 @@ def cmd_render(args) -> int:
     try:
         frames = (replay_frames(env, states, args.size, args.quality) if states is not None
                   else rollout_frames(env, total - 1, args.seed, args.size, args.quality))
-        bar = tqdm(frames, total=total, unit="frame", desc=desc, disable=args.quiet)
+        bar = progress_bar(frames, total=total, unit="frame", desc=desc, disable=args.quiet)
         n = write_video(args.out, bar, fps=env.unwrapped.metadata.get("render_fps", 20))
     finally:
         env.close()

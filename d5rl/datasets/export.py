@@ -94,7 +94,7 @@ def export_minari(task: str, *, dataset_id: str | None = None, seed: int | None 
     except ImportError as e:
         raise MissingDependencyError("Minari export needs the `minari` package",
                                      "pip install 'd5rl[export]'") from e
-    from tqdm.auto import tqdm
+    from d5rl.progress import progress_bar
 
     from d5rl.datasets.loading import load_dataset
 
@@ -107,7 +107,7 @@ def export_minari(task: str, *, dataset_id: str | None = None, seed: int | None 
     env.close()
     ds = load_dataset(spec, seed=seed, episodes=episodes, generate=False, progress=False)
     buffers = []
-    for i, ep in enumerate(tqdm(ds.episodes(), total=ds.num_episodes, unit="ep", desc="export",
+    for i, ep in enumerate(progress_bar(ds.episodes(), total=ds.num_episodes, unit="ep", desc="export",
                                 disable=not progress)):
         a = ep.arrays
         obs = _episode_obs(a, obs_space)

@@ -18,7 +18,7 @@ import time
 from pathlib import Path
 
 import numpy as np
-from tqdm.auto import tqdm
+from d5rl.progress import progress_bar
 
 from d5rl import parallel, paths
 from d5rl.datasets import format as fmt
@@ -254,7 +254,7 @@ def _generate_locked(spec, dspec, seed, num_episodes, root, workers, force, prog
               + (" ..." if len(repairs) > 5 else ""), file=sys.stderr, flush=True)
 
     done_eps = sum(stop - start for i, (start, stop) in enumerate(plan) if i in records)
-    bar = tqdm(
+    bar = progress_bar(
         total=target, initial=done_eps, unit="ep", desc=f"generate {dspec.name}",
         disable=not progress, dynamic_ncols=True,
     )

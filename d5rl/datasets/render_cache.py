@@ -151,9 +151,9 @@ def ensure_render_cache(root: str | Path, manifest: dict, fn: str, kwargs: dict[
                   "compressing them in place (lossless, no re-rendering)", file=sys.stderr, flush=True)
         bar = None
         if progress and (jobs or migrate):
-            from tqdm import tqdm
+            from d5rl.progress import progress_bar
 
-            bar = tqdm(total=todo_eps, desc=f"rendering {name}", unit="ep")
+            bar = progress_bar(total=todo_eps, desc=f"rendering {name}", unit="ep")
         try:
             for func, todo in ((compress_shard, migrate), (render_shard, jobs)):
                 if todo:

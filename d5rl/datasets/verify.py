@@ -41,9 +41,9 @@ def verify_dataset(task: str | TaskSpec, seed: int | None = None, progress: bool
         dirs += [(d, None) for d in fmt.iter_shard_dirs(render_root)]
     it = dirs
     if progress:
-        from tqdm.auto import tqdm
+        from d5rl.progress import progress_bar
 
-        it = tqdm(dirs, unit="shard", desc=f"verify {root.parent.name}")
+        it = progress_bar(dirs, unit="shard", desc=f"verify {root.parent.name}")
     for d, entry in it:
         problems += fmt.verify_shard(d, entry)
     if entries and manifest.get("num_episodes") != entries[-1]["episodes"][1]:

@@ -120,9 +120,9 @@ def prepare_datasets(cells: Iterable[Cell], workers: int | None = None, progress
 
 
 def _progress(total: int, initial: int, enabled: bool):
-    from tqdm.auto import tqdm
+    from d5rl.progress import progress_bar
 
-    return tqdm(total=total, initial=initial, unit="cell", desc="bench", disable=not enabled, dynamic_ncols=True)
+    return progress_bar(total=total, initial=initial, unit="cell", desc="bench", disable=not enabled, dynamic_ncols=True)
 
 
 def run_bench(cells: Iterable[Cell], run_dir: Path | str, *, workers: int | None = None,

@@ -26,7 +26,7 @@ from typing import Any, Iterable, Mapping
 
 import jax
 import numpy as np
-from tqdm.auto import tqdm
+from d5rl.progress import progress_bar
 
 from d5rl.agents import get_agent
 from d5rl.agents.config import Config
@@ -128,7 +128,7 @@ def train(
     run = Run(task_id, seed, offline_steps, online_steps, run_dir, cfg, agent_cls, agent_cfg, sampler, example,
               is_pixel_obs(example["observations"]), logger,
               Evaluator(task_id, seed, cfg.frame_stack, cfg, logger, run_dir),
-              tqdm(total=offline_steps + online_steps, unit="step", dynamic_ncols=True, smoothing=0.05,
+              progress_bar(total=offline_steps + online_steps, unit="step", dynamic_ncols=True, smoothing=0.05,
                    mininterval=1.0, disable=not cfg.progress))
     agent, state = _start(run, resume)
     try:
