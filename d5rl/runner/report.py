@@ -167,7 +167,7 @@ def comparison_markdown(table: dict, phase: str, title: str) -> str | None:
     rows = [r for r in _table_rows(table, algos) if any(paper_result(r[1], a, phase) for a in algos)]
     if not rows:
         return None
-    lines = [f"### {title}: ours / paper", "",
+    lines = [f"### {title} (ours / paper)", "",
              "Each entry: this run's mean ± std over seeds / the paper's (500k steps per phase, its own data "
              "and score references; its kitchen and WidowX agents see cameras, so a `-state` task is compared "
              "with its camera task's row). `-`: not run here, or not in the paper.", "",
