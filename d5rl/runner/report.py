@@ -311,8 +311,8 @@ def write_report(run_dir: Path | str, out_dir: Path | str | None = None, reps: i
                         repr(r.final["online"]) if "online" in r.final else "", r.final_step.get("online", ""),
                         len(r.evals), r.failures])
 
-    title = run_dir.parent.name if run_dir.name == "cells" else run_dir.name  # docs/results/NAME/cells
-    parts = [f"# Benchmark report: {title}", "",
+    run_name = run_dir.parent.name if run_dir.name == "cells" else run_dir.name  # docs/results/NAME/cells
+    parts = [f"# Benchmark report: {run_name}", "",
              f"{sum(r.done for r in results)} of {len(results)} cells finished. Scores are normalized "
              "(0 = random, 1 = expert reference of the task); each cell's score is its last evaluation "
              "of the phase. ± is the standard deviation over seeds (ddof=0).", ""]
