@@ -10,6 +10,7 @@ import jax
 import numpy as np
 import pytest
 
+from d5rl.datasets.dataset import Dataset
 from d5rl.training.checkpoint import (Checkpoint, CheckpointError, load_checkpoint, read_checkpoint,
                                       save_checkpoint)
 from d5rl.training.loop import load_run, train
@@ -142,8 +143,6 @@ def test_a_checkpoint_of_another_observation_size_is_refused_in_one_line(tmp_pat
     """flax restores arrays of any shape: without a check the run failed deep in the first update."""
     run = tmp_path / "run"
     train("bc", "toy-reach-v0", 8, 0, 0, SMALL + ["checkpoint_interval=8"], run, dataset=toy_dataset(10))
-    from d5rl.datasets.dataset import Dataset
-
     ds = toy_dataset(10)
     eps = [ds.episode(i) for i in range(ds.num_episodes)]
     for e in eps:
