@@ -178,7 +178,7 @@ def comparison_markdown(table: dict, phase: str, title: str) -> str | None:
         cells = []
         for a in algos:
             e, p = entries[a], paper_result(task, a, phase)
-            ours = "-" if e is None else f"{_fmt(e[0])} ± {_fmt(e[1])}"
+            ours = "-" if e is None else f"{_fmt(e[0])} ± {_fmt(e[1])}" + (f" (n={e[2]})" if e[2] < 2 else "")
             paper = "-" if p is None else _fmt(p[0]) + ("" if p[1] is None else f" ± {_fmt(p[1])}")
             cells.append(f"{ours} / {paper}")
         label = task if paper_task(task) == task else f"{task} (paper: {paper_task(task)})"
