@@ -159,7 +159,8 @@ def _write_config(run_dir: Path, settings, agent_cfg: Config, seed: int, resumed
 def _start(run: Run, resume: Checkpoint | None) -> tuple[Any, RunState]:
     """A new agent and state, or those of the checkpoint."""
     agent = run.new_agent(run.seed)
-    if resume is None:
+    if resume is None:  # a fresh start: rows an earlier, killed attempt logged here are stale
+        run.logger.truncate_after(-1)
         return agent, RunState(np.random.default_rng([run.seed, 1]))
     buffer = None
     if resume.buffer is not None:

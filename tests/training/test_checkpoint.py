@@ -150,3 +150,12 @@ def test_a_checkpoint_of_another_observation_size_is_refused_in_one_line(tmp_pat
     with pytest.raises(CheckpointError, match=r"has shape \(4, 32\), this agent's \(8, 32\)"):
         train("bc", "toy-reach-v0", 16, 0, 0, SMALL + ["checkpoint_interval=8"], run,
               dataset=Dataset.from_episodes(eps, metadata=ds.metadata))
+
+
+def test_a_fresh_start_drops_the_metrics_of_a_killed_attempt_without_checkpoint(tmp_path):
+    run = tmp_path / "run"
+    run.mkdir()
+    (run / "metrics.jsonl").write_text(json.dumps({"step": 4000, "stale/loss": 1.0}) + "\n")
+    train("bc", "toy-reach-v0", 8, 0, 0, SMALL, run, dataset=toy_dataset(10))
+    rows = [json.loads(line) for line in (run / "metrics.jsonl").read_text().splitlines()]
+    assert rows and all(r["step"] <= 8 and "stale/loss" not in r for r in rows)
