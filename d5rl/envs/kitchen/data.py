@@ -56,7 +56,8 @@ class KitchenStandardGenerator:
 
     # 2: integral action, wrist homing; 3: unwind before microwave/kettle; 4: straight reaches;
     # 5: joint-space transits to inverse-kinematics solutions between subtasks
-    version = "kitchen-standard-demos-5"
+    # 6: no detours via random points and no pauses (Style.sample): a unimodal BC could not follow them
+    version = "kitchen-standard-demos-6"
 
     def __init__(self, task_id: str | None = None, max_steps: int = MAX_STEPS):
         from d5rl.envs.kitchen.task import KitchenEnv

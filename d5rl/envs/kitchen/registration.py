@@ -7,7 +7,7 @@ MAX_EPISODE_STEPS = 280  # control steps of 0.08 s (the D5RL release's standard 
 
 STANDARD_DATASET = DatasetSpec(
     name="kitchen-standard",
-    version=0,
+    version=1,  # 1: demonstrator without detours or pauses (generator kitchen-standard-demos-6)
     generator="d5rl.envs.kitchen.data:KitchenStandardGenerator",
     num_episodes=563,
     episodes_per_shard=16,
