@@ -153,6 +153,43 @@ def _run_shard(root: str, index: int, start: int, stop: int, ident: dict) -> dic
         raise
 
 
+# --- what a result was trained on --------------------------------------------------------------------
+# The part of a dataset's identity that decides its content (a result trained on data that differs in any
+# of these describes other data).
+RESULT_IDENTITY_KEYS = ("dataset", "dataset_version", "generator_version", "seed")
+
+
+def data_identity(task: str | TaskSpec, seed: int | None = None) -> dict | None:
+    """What ``task``'s dataset is when this d5rl generates it (at ``seed``, default the dataset's):
+    ``{"dataset", "dataset_version", "generator_version", "seed"}``; None for a task without a dataset."""
+    spec = get_spec(task)
+    if spec.dataset is None:
+        return None
+    dspec = spec.dataset
+    seed = dspec.default_seed if seed is None else int(seed)
+    ident = _identity(dspec, seed, str(resolve(dspec.generator).version))
+    return {k: ident[k] for k in RESULT_IDENTITY_KEYS}
+
+
+def stale_data(task: str, recorded: dict | None) -> str | None:
+    """Why a result trained on the dataset ``recorded`` (a :func:`data_identity`, as a run's config.json
+    keeps it) no longer describes ``task``'s data, or None when it still does (or nothing was recorded)."""
+    if not recorded:
+        return None
+    try:
+        now = data_identity(task, recorded.get("seed"))
+    except D5RLError:  # a task only a custom job knows
+        return None
+    if now is None:
+        return None
+    diffs = [k for k in RESULT_IDENTITY_KEYS if recorded.get(k) != now[k]]
+    if not diffs:
+        return None
+    return (f"trained on {recorded.get('dataset')} v{recorded.get('dataset_version')} "
+            f"(generator {recorded.get('generator_version')}); the task's data is now "
+            f"{now['dataset']} v{now['dataset_version']} (generator {now['generator_version']})")
+
+
 # --- driver side -------------------------------------------------------------------------------------
 def check_current(manifest: dict, dspec: DatasetSpec, seed: int, where: Path) -> None:
     """Raise :class:`DatasetVersionError` unless ``manifest`` was written by this code and settings."""

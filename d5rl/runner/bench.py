@@ -4,7 +4,9 @@
 
 Idempotent: a cell with a ``done`` marker is skipped, so a killed sweep resumes
 by running the same command again.  A failing cell is recorded (error and
-traceback in its directory) and retried once (``max_attempts=2``).
+traceback in its directory) and retried once (``max_attempts=2``).  A finished cell
+whose job recorded a dataset that is no longer the task's (a new dataset or generator
+version) is stale: the same command trains it again, so a grid follows its data.
 """
 
 from __future__ import annotations
@@ -25,9 +27,9 @@ from d5rl.errors import D5RLError
 from d5rl.parallel import connect_ray
 from d5rl.files import write_atomic
 from d5rl.parallel import configure_worker
-from d5rl.runner.execute import (EXIT_CODES, LOG_FILE, clear_job_outputs,
-                                 execute_cell, is_done, read_failures, record_failure, write_cell_file)
-from d5rl.runner.grid import DEFAULT_JOB, Cell, GridError, read_cell
+from d5rl.runner.execute import (EXIT_CODES, LOG_FILE, clear_job_outputs, execute_cell, is_done, read_failures,
+                                 record_failure, reset_cell, write_cell_file)
+from d5rl.runner.grid import DEFAULT_JOB, Cell, GridError, read_cell, stale_reason
 
 BENCH_FILE = "bench.json"
 
@@ -39,12 +41,14 @@ class BenchResult:
     skipped: list[str] = dataclasses.field(default_factory=list)  # already done before
     failed: dict[str, str] = dataclasses.field(default_factory=dict)  # key -> last error
     busy: list[str] = dataclasses.field(default_factory=list)  # running in another sweep
+    stale: list[str] = dataclasses.field(default_factory=list)  # finished on older data, trained again now
     attempts: dict[str, int] = dataclasses.field(default_factory=dict)  # key -> attempts made now
     wall_s: float = 0.0
 
     def summary(self) -> str:
         s = (f"{len(self.ok)} finished, {len(self.skipped)} already done, {len(self.failed)} failed"
-             f"{f', {len(self.busy)} running elsewhere' if self.busy else ''} in {self.wall_s:.1f} s")
+             f"{f', {len(self.busy)} running elsewhere' if self.busy else ''}"
+             f"{f', {len(self.stale)} rerun on new data' if self.stale else ''} in {self.wall_s:.1f} s")
         for key, err in self.failed.items():
             s += f"\n  FAILED {key}: {err.splitlines()[0] if err else ''}\n    see {self.run_dir / key / 'error.txt'}"
         return s
@@ -143,10 +147,16 @@ def run_bench(cells: Iterable[Cell], run_dir: Path | str, *, workers: int | None
     result = BenchResult(run_dir=run_dir)
     pending = []
     for cell in cells:
-        if is_done(cell.directory(run_dir)):
-            result.skipped.append(cell.key)
-        else:
-            pending.append(cell)
+        cdir = cell.directory(run_dir)
+        if is_done(cdir):
+            why = stale_reason(cell, cdir)
+            if why is None:
+                result.skipped.append(cell.key)
+                continue
+            print(f"{cell.key} is stale, training it again: {why}", file=sys.stderr)
+            reset_cell(cdir)
+            result.stale.append(cell.key)
+        pending.append(cell)
     if prepare_data and pending:
         prepare_datasets(pending, workers=workers or None, progress=progress)
     bar = _progress(len(cells), len(result.skipped), progress)

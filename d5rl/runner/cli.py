@@ -91,7 +91,8 @@ def cmd_bench(args) -> int:
                         tuned=not args.no_tuned, protocol_overrides=protocol)
     if args.dry_run:
         for c in cells:
-            print(c.key, f"offline {c.offline_steps}, online {c.online_steps}", _resolved_summary(c, args.job))
+            print(c.key, f"[{_cell_status(c, args.out)}]", f"offline {c.offline_steps}, online {c.online_steps}",
+                  _resolved_summary(c, args.job))
         print(f"{len(cells)} cells")
         return 0
     print(f"{len(tasks)} tasks × {len(algos)} algorithms × {len(seeds)} seeds = {len(cells)} cells -> {args.out}",
@@ -109,6 +110,18 @@ def cmd_bench(args) -> int:
         except ReportError as e:
             print(f"no report: {e.message}", file=sys.stderr)
     return 1 if result.failed else 0
+
+
+def _cell_status(cell, run_dir) -> str:
+    """"done", "stale: <why>" (finished on data the task no longer has: it would run again) or "to run"."""
+    from d5rl.runner.execute import is_done
+    from d5rl.runner.grid import stale_reason
+
+    cdir = cell.directory(run_dir)
+    if not is_done(cdir):
+        return "to run"
+    why = stale_reason(cell, cdir)
+    return "done" if why is None else f"stale: {why}"
 
 
 def _resolved_summary(cell, job: str) -> str:

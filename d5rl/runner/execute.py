@@ -103,6 +103,13 @@ def clear_job_outputs(cell_dir: Path) -> None:
             p.unlink()
 
 
+def reset_cell(cell_dir: Path) -> None:
+    """Make a finished cell unfinished and empty (its results describe data the task no longer has): the
+    ``done`` marker and the job's outputs go; the runner's log and failure records stay."""
+    (Path(cell_dir) / DONE_FILE).unlink(missing_ok=True)
+    clear_job_outputs(Path(cell_dir))
+
+
 def record_failure(cell_dir: Path, attempt: int, error: str, tb: str, wall_s: float | None = None) -> dict:
     rec = {
         "attempt": attempt, "error": error, "traceback": tb, "host": socket.gethostname(),

@@ -34,6 +34,7 @@ FAILURES_FILE = "failures.jsonl"
 ERROR_FILE = "error.txt"
 LOG_FILE = "log.txt"
 LOCK_FILE = ".lock"
+CONFIG_FILE = "config.json"  # the job's (d5rl's trainer: resolved settings and the dataset it trained on)
 WORKER_FILE = ".worker.json"
 # Files the runner owns in a cell directory; everything else belongs to the job
 # and is cleared before a fresh attempt (a half-written eval log must not mix
@@ -129,3 +130,22 @@ def find_cells(run_dir: Path | str) -> list[tuple[Cell, Path]]:
         if cell is not None:
             out.append((cell, path.parent))
     return out
+
+
+def trained_on(cell_dir: Path) -> dict | None:
+    """The dataset a cell's job recorded in its config.json (d5rl's trainer does), or None."""
+    path = Path(cell_dir) / CONFIG_FILE
+    try:
+        record = json.loads(path.read_text()).get("dataset")
+    except (OSError, ValueError, AttributeError):
+        return None
+    return record if isinstance(record, dict) else None
+
+
+def stale_reason(cell: Cell, cell_dir: Path) -> str | None:
+    """Why a cell's result describes data its task no longer has (the dataset's version or generator changed
+    since it trained), or None: current, or no dataset recorded."""
+    from d5rl.datasets.generation import stale_data
+
+    return stale_data(cell.task, trained_on(cell_dir))
+

@@ -14,9 +14,13 @@
 * ``aggregate.{md,csv}`` — per method and table: IQM over all tasks and seeds
   with a 95 % stratified-bootstrap interval (:mod:`d5rl.runner.stats`), and the mean;
 * ``curves/<task>.png`` — learning curves (mean ± std over seeds per method);
+* ``protocol.md`` — per task and method: steps, evaluation episodes, the dataset the cells trained on,
+  and the wall time a cell took;
 * ``report.md`` — all of it on one page, with links to rollout videos the trainer saved.
 
-``±`` is the standard deviation over seeds with ``ddof=0`` (``numpy.std``).
+``±`` is the standard deviation over seeds with ``ddof=0`` (``numpy.std``).  Cells trained on data
+their task no longer has (a newer dataset or generator version) are left out of every table and listed
+as stale; ``d5rl bench`` with the same command trains them again.
 """
 
 from __future__ import annotations
@@ -33,7 +37,7 @@ import numpy as np
 from d5rl.errors import D5RLError
 from d5rl.runner import stats
 from d5rl.runner.execute import is_done, read_failures
-from d5rl.runner.grid import find_cells
+from d5rl.runner.grid import DONE_FILE, find_cells, stale_reason, trained_on
 from d5rl.runner.logs import final_scores, read_evals
 
 # Paper order and display names; algorithms outside this list follow in alphabetical order.
@@ -94,6 +98,15 @@ class CellResult:
     final: dict[str, float]
     failures: int
     videos: list[Path]
+    stale: str | None = None  # why the result describes data the task no longer has (None: current)
+    data: dict | None = None  # the dataset the job recorded (name, versions, seed, episodes)
+    wall_s: float | None = None  # the finished attempt's wall time
+    eval_episodes: int | None = None  # episodes of the final evaluation
+
+    @property
+    def counts(self) -> bool:
+        """Finished on the task's current data: its scores go into the tables."""
+        return self.done and self.stale is None
 
     @property
     def final_step(self) -> dict[str, int]:
@@ -113,16 +126,31 @@ def collect(run_dir: Path | str) -> list[CellResult]:
         if cell.online_steps <= 0:
             final.pop("online", None)
         videos = sorted(p for p in cdir.rglob("*") if p.suffix.lower() in VIDEO_EXTS)
+        done = is_done(cdir)
+        marker = _read_json(cdir / DONE_FILE) if done else {}
+        summary = marker.get("summary") or {}
         out.append(CellResult(cell.task, cell.algo, cell.seed, cell.offline_steps, cell.online_steps, cdir,
-                              is_done(cdir), rows, final, len(read_failures(cdir)), videos))
+                              done, rows, final, len(read_failures(cdir)), videos,
+                              stale=stale_reason(cell, cdir) if done else None, data=trained_on(cdir),
+                              wall_s=marker.get("wall_s"), eval_episodes=summary.get("episodes")))
     return out
+
+
+def _read_json(path: Path) -> dict:
+    import json
+
+    try:
+        out = json.loads(Path(path).read_text())
+    except (OSError, ValueError):
+        return {}
+    return out if isinstance(out, dict) else {}
 
 
 def score_table(results: list[CellResult], phase: str) -> dict[tuple[str, str], np.ndarray]:
     """``{(task, algo): final scores over seeds}`` of finished cells for one phase."""
     table: dict[tuple[str, str], list[float]] = {}
     for r in results:
-        if r.done and phase in r.final:
+        if r.counts and phase in r.final:
             table.setdefault((r.task, r.algo), []).append(r.final[phase])
     return {k: np.asarray(v, np.float64) for k, v in table.items()}
 
@@ -184,6 +212,47 @@ def comparison_markdown(table: dict, phase: str, title: str) -> str | None:
         label = task if paper_task(task) == task else f"{task} (paper: {paper_task(task)})"
         lines.append(f"| {env if env != prev else ''} | {label} | " + " | ".join(cells) + " |")
         prev = env
+    return "\n".join(lines) + "\n"
+
+
+def _data_label(data: dict | None) -> str:
+    if not data:
+        return "not recorded"
+    eps = f", {data['episodes']} episodes" if data.get("episodes") is not None else ""
+    return f"{data.get('dataset')} v{data.get('dataset_version')} ({data.get('generator_version')}){eps}"
+
+
+def _duration(seconds: float) -> str:
+    return f"{seconds:.0f} s" if seconds < 120 else (f"{seconds / 60:.1f} min" if seconds < 7200
+                                                       else f"{seconds / 3600:.1f} h")
+
+
+def protocol_markdown(results: list[CellResult]) -> str | None:
+    """Per task and method, over the cells that count: budget, evaluation, data and wall time."""
+    groups: dict[tuple[str, str], list[CellResult]] = {}
+    for r in results:
+        if r.counts:
+            groups.setdefault((r.task, r.algo), []).append(r)
+    if not groups:
+        return None
+    order = _method_order({a for _, a in groups})
+    keys = sorted(groups, key=lambda k: (_env_order(environment(k[0])), environment(k[0]), k[0], order.index(k[1])))
+    lines = ["### Protocol and cost", "",
+             "Per task and method, over the finished cells: gradient steps (then online environment steps), "
+             "episodes of the final evaluation, the dataset the cells trained on, and the median wall time of a "
+             "cell (its host and the others running beside it vary; see each cell's `done`).", "",
+             "| Task | Method | Cells | Steps | Final evaluation | Dataset | Wall time per cell |",
+             "|---|---|---|---|---|---|---|"]
+    for task, algo in keys:
+        cells = groups[(task, algo)]
+        steps = ", ".join(f"{off:,}" + (f" + {on:,} online" if on else "")
+                          for off, on in sorted({(c.offline_steps, c.online_steps) for c in cells}))
+        eps = ", ".join(str(e) for e in sorted({int(c.eval_episodes) for c in cells if c.eval_episodes}))
+        data = "; ".join(sorted({_data_label(c.data) for c in cells}))
+        walls = [c.wall_s for c in cells if c.wall_s is not None]
+        wall = _duration(float(np.median(walls))) if walls else "-"
+        lines.append(f"| {task} | {method_name(algo)} | {len(cells)} | {steps} | "
+                     f"{eps + ' episodes' if eps else '-'} | {data} | {wall} |")
     return "\n".join(lines) + "\n"
 
 
@@ -304,16 +373,18 @@ def write_report(run_dir: Path | str, out_dir: Path | str | None = None, reps: i
         w = csv.writer(f)
         w.writerow(["environment", "task", "algo", "seed", "done", "offline_steps", "online_steps",
                     "offline_score", "offline_score_step", "online_score", "online_score_step", "evaluations",
-                    "failed_attempts"])
+                    "failed_attempts", "stale"])
         for r in sorted(results, key=lambda r: (r.task, r.algo, r.seed)):
             w.writerow([environment(r.task), r.task, r.algo, r.seed, int(r.done), r.offline_steps, r.online_steps,
                         repr(r.final["offline"]) if "offline" in r.final else "", r.final_step.get("offline", ""),
                         repr(r.final["online"]) if "online" in r.final else "", r.final_step.get("online", ""),
-                        len(r.evals), r.failures])
+                        len(r.evals), r.failures, r.stale or ""])
 
     run_name = run_dir.parent.name if run_dir.name == "cells" else run_dir.name  # docs/results/NAME/cells
+    stale = [r for r in results if r.done and r.stale is not None]
     parts = [f"# Benchmark report: {run_name}", "",
-             f"{sum(r.done for r in results)} of {len(results)} cells finished. Scores are normalized "
+             f"{sum(r.counts for r in results)} of {len(results)} cells finished"
+             f"{f' ({len(stale)} more on older data: see Stale cells)' if stale else ''}. Scores are normalized "
              "(0 = random, 1 = expert reference of the task); each cell's score is its last evaluation "
              "of the phase. ± is the standard deviation over seeds (ddof=0).", ""]
     agg_rows = []
@@ -340,6 +411,10 @@ def write_report(run_dir: Path | str, out_dir: Path | str | None = None, reps: i
         w.writerow(["table", "method", "group", "tasks", "runs", "iqm", "iqm_lo", "iqm_hi", "mean"])
         w.writerows(agg_rows)
     (out / "aggregate.md").write_text("\n".join(p for p in parts if p.startswith("### Aggregate")))
+    protocol = protocol_markdown(results)
+    if protocol:
+        (out / "protocol.md").write_text(protocol)
+        parts.append(protocol)
 
     if plots:
         pngs = plot_curves(results, out / "curves")
@@ -358,6 +433,11 @@ def write_report(run_dir: Path | str, out_dir: Path | str | None = None, reps: i
                   "interval that divides --offline-steps to avoid this.", ""]
         parts += [f"- {r.task}/{r.algo}/seed{r.seed}: offline score from step {r.final_step.get('offline')} "
                   f"of {r.offline_steps}" for r in early] + [""]
+    if stale:
+        parts += ["## Stale cells", "", "Trained on data their task no longer has, so left out of every table above. "
+                  "The same `d5rl bench` command trains them again on the current data.", "",
+                  "| Cell | Why |", "|---|---|"]
+        parts += [f"| {r.task}/{r.algo}/seed{r.seed} | {r.stale} |" for r in stale] + [""]
     incomplete = [r for r in results if not r.done]
     if incomplete:
         parts += ["## Unfinished cells", "", "| Cell | Failed attempts | Error |", "|---|---|---|"]

@@ -123,7 +123,7 @@ def train(
     sampler = Sampler(ds, cfg.frame_stack, agent_cls.extra_batch_keys, agent_cfg.get("discount", 0.99))
     example = sampler.sample(1, np.random.default_rng(0))
     resume = load_checkpoint(run_dir)
-    _write_config(run_dir, settings, agent_cfg, seed, resumed=resume is not None)
+    _write_config(run_dir, settings, agent_cfg, seed, resumed=resume is not None, dataset=_data_record(ds))
     logger = Logger(run_dir, tensorboard=cfg.tensorboard)
     run = Run(task_id, seed, offline_steps, online_steps, run_dir, cfg, agent_cls, agent_cfg, sampler, example,
               is_pixel_obs(example["observations"]), logger,
@@ -143,9 +143,23 @@ def train(
         logger.close()
 
 
-def _write_config(run_dir: Path, settings, agent_cfg: Config, seed: int, resumed: bool) -> None:
-    """``config.json``: what this run is; a resumed run must be the same run."""
-    resolved = {**settings.to_json(), "seed": seed, "agent": agent_cfg.to_dict()}
+def _data_record(ds) -> dict | None:
+    """The dataset a run trains on (its identity and the episodes used), for config.json; None for data
+    that is not a generated d5rl dataset (in-memory test data)."""
+    from d5rl.datasets.generation import RESULT_IDENTITY_KEYS
+
+    meta = getattr(ds, "metadata", {}) or {}
+    if not all(k in meta for k in RESULT_IDENTITY_KEYS):
+        return None
+    return {**{k: meta[k] for k in RESULT_IDENTITY_KEYS}, "episodes": int(ds.num_episodes)}
+
+
+def _write_config(run_dir: Path, settings, agent_cfg: Config, seed: int, resumed: bool,
+                  dataset: dict | None = None) -> None:
+    """``config.json``: what this run is, including the dataset it trains on (reports use it to tell results
+    of older data apart); a resumed run must be the same run on the same data."""
+    resolved = {**settings.to_json(), "seed": seed, "agent": agent_cfg.to_dict(),
+                **({"dataset": dataset} if dataset is not None else {})}
     path = run_dir / "config.json"
     if resumed and path.exists():
         old = json.loads(path.read_text())
@@ -153,6 +167,9 @@ def _write_config(run_dir: Path, settings, agent_cfg: Config, seed: int, resumed
         if {k: old.get(k) for k in keys} != {k: resolved[k] for k in keys}:
             raise RunDirError(f"{run_dir} holds a run with a different algorithm, task, seed or agent config",
                               "pick another --run-dir, or delete that directory to start over")
+        if "dataset" in old and dataset is not None and old["dataset"] != dataset:
+            raise RunDirError(f"{run_dir} holds a run trained on other data ({old['dataset']}); this one loads "
+                              f"{dataset}", "pick another --run-dir, or delete that directory to start over")
     path.write_text(json.dumps(resolved, indent=2) + "\n")
 
 

@@ -98,3 +98,21 @@ def test_modern_baselines_train_offline_then_online_from_the_cli(tmp_path, capsy
     assert summary["step"] == 46 and np.isfinite(summary["score"])
     rows = [json.loads(x) for x in (tmp_path / "run" / "metrics.jsonl").read_text().splitlines()]
     assert any("train/episode_return" in r for r in rows)  # the online phase ran (with next actions in the buffer)
+
+
+def test_the_run_records_the_dataset_it_trains_on(tmp_path):
+    import d5rl
+    from d5rl.datasets.generation import data_identity
+    from d5rl.training.loop import RunDirError
+
+    ds = d5rl.load_dataset("toy-reach-v0", episodes=6)
+    train("bc", "toy-reach-v0", 8, 0, 0, overrides(), tmp_path / "r", dataset=ds)
+    recorded = json.loads((tmp_path / "r" / "config.json").read_text())["dataset"]
+    assert recorded == {**data_identity("toy-reach-v0"), "episodes": 6}
+    # the same directory resumed on other data is another run
+    ds.metadata["dataset_version"] = recorded["dataset_version"] + 1
+    with pytest.raises(RunDirError, match="trained on other data"):
+        train("bc", "toy-reach-v0", 16, 0, 0, overrides(), tmp_path / "r", dataset=ds)
+    # in-memory data (no generated dataset behind it) records nothing
+    train("bc", "toy-reach-v0", 8, 0, 0, overrides(), tmp_path / "m", dataset=toy_dataset(5))
+    assert "dataset" not in json.loads((tmp_path / "m" / "config.json").read_text())

@@ -1,0 +1,71 @@
+"""Results follow their data: a cell trained on a dataset its task no longer has (an older dataset or
+generator version) is stale; the report leaves it out of every table and lists it, and the same bench
+command trains it again."""
+
+import csv
+import json
+from pathlib import Path
+
+import pytest
+
+from d5rl.datasets.generation import data_identity, stale_data
+from d5rl.runner import expand_grid, run_bench, write_report
+from d5rl.runner.grid import stale_reason
+
+JOB = "tests.runner.test_stale:data_job"
+TASK = "toy-reach-v0"
+
+
+def data_job(cell, cell_dir):
+    """Records the data it "trained on" the way d5rl's trainer does (config.json), and one evaluation."""
+    cell_dir = Path(cell_dir)
+    (cell_dir / "config.json").write_text(json.dumps({"dataset": {**data_identity(cell.task), "episodes": 7}}))
+    (cell_dir / "eval.csv").write_text(f"step,score\n{cell.offline_steps},{0.25 * (cell.seed + 1)}\n")
+    return {"episodes": 4}
+
+
+def test_a_result_is_stale_when_its_dataset_or_generator_version_changed():
+    now = data_identity(TASK)
+    assert set(now) == {"dataset", "dataset_version", "generator_version", "seed"}
+    assert stale_data(TASK, {**now, "episodes": 3}) is None
+    assert stale_data(TASK, None) is None  # nothing recorded: cannot tell
+    older = {**now, "dataset_version": now["dataset_version"] - 1}
+    why = stale_data(TASK, older)
+    assert why is not None and f"v{now['dataset_version'] - 1}" in why and f"now toy-reach v{now['dataset_version']}" in why
+    assert stale_data(TASK, {**now, "generator_version": "toy-reach-0-old"}) is not None
+    assert stale_data("no-such-task-v0", older) is None  # a task only a custom job knows
+
+
+def _make_stale(cell_dir: Path) -> None:
+    cfg = json.loads((cell_dir / "config.json").read_text())
+    cfg["dataset"]["dataset_version"] -= 1
+    (cell_dir / "config.json").write_text(json.dumps(cfg))
+
+
+def test_stale_cells_leave_the_tables_and_the_same_command_trains_them_again(tmp_path):
+    cells = expand_grid([TASK], ["bc"], [0, 1], 10, 0, job=JOB, tuned=False)
+    first = run_bench(cells, tmp_path, workers=0, progress=False)
+    assert sorted(first.ok) == sorted(c.key for c in cells) and not first.stale
+    old, current = cells
+    _make_stale(old.directory(tmp_path))
+    assert stale_reason(old, old.directory(tmp_path)) is not None
+    assert stale_reason(current, current.directory(tmp_path)) is None
+
+    report = write_report(tmp_path, reps=50, plots=False).read_text()
+    assert "1 of 2 cells finished (1 more on older data" in report
+    assert f"| {old.key} | trained on toy-reach v" in report
+    with open(tmp_path / "report" / "table1_offline.csv", newline="") as f:
+        [row] = list(csv.DictReader(f))
+    assert row["bc_n"] == "1" and float(row["bc_mean"]) == pytest.approx(0.5)  # seed 1's score only
+    protocol = (tmp_path / "report" / "protocol.md").read_text()
+    assert f"| {TASK} | BC | 1 | 10 | 4 episodes | toy-reach v" in protocol and "7 episodes" in protocol
+
+    again = run_bench(cells, tmp_path, workers=0, progress=False)
+    assert again.stale == [old.key] and again.ok == [old.key] and again.skipped == [current.key]
+    assert "1 rerun on new data" in again.summary()
+    assert stale_reason(old, old.directory(tmp_path)) is None
+    report = write_report(tmp_path, reps=50, plots=False).read_text()
+    assert "Stale cells" not in report and "2 of 2 cells finished." in report
+
+    third = run_bench(cells, tmp_path, workers=0, progress=False)
+    assert sorted(third.skipped) == sorted(c.key for c in cells) and not third.ok
