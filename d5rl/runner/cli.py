@@ -140,7 +140,8 @@ def _resolved_summary(cell, job: str) -> str:
 def cmd_report(args) -> int:
     from d5rl.runner.report import write_report
 
-    path = write_report(args.run_dir, args.out, reps=args.reps, seed=args.seed, plots=not args.no_plots)
+    path = write_report(args.run_dir, args.out, reps=args.reps, seed=args.seed, plots=not args.no_plots,
+                        videos=args.videos)
     print(path.read_text() if args.print else f"wrote {path}")
     return 0
 
@@ -194,6 +195,8 @@ def add_report_parser(subparsers) -> argparse.ArgumentParser:
     q.add_argument("--reps", type=int, default=2000, help="bootstrap resamples (default 2000)")
     q.add_argument("--seed", type=int, default=0, help="seed of the bootstrap")
     q.add_argument("--no-plots", action="store_true", help="skip the learning-curve PNGs")
+    q.add_argument("--videos", action="store_true",
+                   help="render one rollout GIF per task from its best cell's checkpoint (needs JAX and GL)")
     q.add_argument("--print", action="store_true", help="print report.md")
     q.set_defaults(func=cmd_report)
     return q

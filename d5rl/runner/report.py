@@ -358,8 +358,9 @@ def plot_curves(results: list[CellResult], out_dir: Path) -> list[Path]:
 
 
 def write_report(run_dir: Path | str, out_dir: Path | str | None = None, reps: int = 2000, seed: int = 0,
-                 plots: bool = True) -> Path:
-    """Write every report file; returns the path of ``report.md``."""
+                 plots: bool = True, videos: bool = False) -> Path:
+    """Write every report file; returns the path of ``report.md``.  ``videos``: also render one rollout GIF
+    per task from the best cell's checkpoint (:mod:`d5rl.runner.videos`)."""
     run_dir = Path(run_dir)
     if not run_dir.is_dir():
         raise ReportError(f"{run_dir} is not a directory", "pass the --out directory of `d5rl bench`")
@@ -424,6 +425,19 @@ def write_report(run_dir: Path | str, out_dir: Path | str | None = None, reps: i
             parts += ["## Learning curves", ""]
             parts += [f"![{p.stem}]({os.path.relpath(p, out)})" for p in pngs]
             parts.append("")
+
+    if videos:
+        from d5rl.runner.videos import write_rollout_gifs
+
+        write_rollout_gifs(results, out)
+    from d5rl.runner.videos import read_captions
+
+    gifs = {t: c for t, c in sorted(read_captions(out / "videos").items()) if (out / "videos" / f"{t}.gif").exists()}
+    if gifs:
+        parts += ["## Rollouts", "", "One evaluation episode per task of its best cell's final policy "
+                  "(`d5rl report RUN_DIR --videos`).", ""]
+        for task, caption in gifs.items():
+            parts += [f"**{task}**: {caption}", "", f"![{task}](videos/{task}.gif)", ""]
 
     early = [r for r in results if r.done and r.online_steps > 0 and r.final_step.get("offline", r.offline_steps)
              != r.offline_steps]

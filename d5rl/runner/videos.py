@@ -1,0 +1,125 @@
+"""One rollout GIF per task for a report: the final policy of the task's best cell, one episode.
+
+``d5rl report RUN_DIR --videos`` calls :func:`write_rollout_gifs`.  For each task it takes the finished,
+current cell with the highest final score (ties: the paper's method order, then the lower seed), restores
+its agent from the cell's checkpoint, runs five evaluation episodes (seeds 0-4, the agent's evaluation
+actions), replays the median-scoring one with the env's render camera (fast render settings, every
+``EVERY``-th step) and writes it to ``videos/<task>.gif``.  Cells whose checkpoint is not on this machine (grids carried between machines keep
+results, not checkpoints) are passed over for the next best; a GIF written earlier is kept when no
+cell of its task has a checkpoint here.  Needs the ``train`` extra (JAX) and a GL backend.
+"""
+
+from __future__ import annotations
+
+from pathlib import Path
+
+import numpy as np
+
+GIF_SIZE = (120, 160)  # (height, width) of the frames
+EVERY = 2  # keep every 2nd step: ~10 frames per second of simulated time at 20 Hz control
+
+
+def _candidates(results, task: str) -> list:
+    from d5rl.runner.report import METHODS
+
+    order = list(METHODS)
+    cells = [r for r in results if r.task == task and r.counts and r.final]
+    score = lambda r: r.final.get("online", r.final.get("offline", -np.inf))  # noqa: E731
+    rank = lambda r: (-score(r), order.index(r.algo) if r.algo in order else len(order), r.seed)  # noqa: E731
+    return sorted(cells, key=rank)
+
+
+def _episode(agent, env, task: str, seed: int, camera=None, every: int = EVERY):
+    """``(normalized score or return, frames)`` of one evaluation episode (frames only with a camera)."""
+    import jax
+
+    from d5rl.training.envs import episode_scorer
+
+    obs, info = env.reset(seed=seed)
+    frames = [camera()] if camera else []
+    ret, t, done = 0.0, 0, False
+    key = jax.random.PRNGKey(seed)
+    while not done:
+        key, k = jax.random.split(key)
+        batch = jax.tree_util.tree_map(lambda x: np.asarray(x)[None], obs)
+        action = np.asarray(agent.eval_actions(batch, seed=k))[0]
+        obs, reward, terminated, truncated, info = env.step(action)
+        ret, t, done = ret + float(reward), t + 1, terminated or truncated
+        if camera and (t % every == 0 or done):
+            frames.append(camera())
+    scorer = episode_scorer(task)
+    return (scorer(ret, info) if scorer is not None else ret), frames
+
+
+def typical_rollout(cell_dir: Path, task: str, *, episodes: int = 5, size=GIF_SIZE, every: int = EVERY):
+    """The median-scoring of ``episodes`` evaluation episodes (seeds 0, 1, ...; the lower seed on ties) of
+    the agent saved in ``cell_dir``: ``(frames, frames per second, its seed, every episode's score)``."""
+    from d5rl.training.envs import make_task_env
+    from d5rl.training.loop import load_run
+    from d5rl.video import FrameRenderer
+
+    agent, resolved = load_run(cell_dir)
+    env = make_task_env(task, resolved["train"]["frame_stack"])
+    try:
+        scores = [_episode(agent, env, task, s)[0] for s in range(episodes)]
+        median = sorted(scores)[(episodes - 1) // 2]
+        seed = scores.index(median)
+        camera = FrameRenderer(env, size, "fast")
+        try:
+            again, frames = _episode(agent, env, task, seed, camera, every)
+        finally:
+            camera.close()
+    finally:
+        env.close()
+    assert again == scores[seed], "evaluation episodes must replay exactly"
+    return frames, float(env.unwrapped.metadata.get("render_fps", 20)) / every, seed, scores
+
+
+def write_gif(path: Path, frames, fps: float) -> None:
+    import imageio
+
+    path.parent.mkdir(parents=True, exist_ok=True)
+    tmp = path.with_name(path.name + ".tmp.gif")
+    imageio.mimwrite(str(tmp), frames, duration=1000.0 / fps, loop=0)
+    tmp.replace(path)
+
+
+def write_rollout_gifs(results, out_dir: Path, log=print) -> dict[str, str]:
+    """``{task: caption}`` for every GIF under ``out_dir/videos`` after writing the ones it can (see the
+    module docstring).  A caption names the cell and the episode's score."""
+    videos = Path(out_dir) / "videos"
+    captions = read_captions(videos)
+    for task in sorted({r.task for r in results}):
+        for cell in _candidates(results, task):
+            if not (cell.directory / "checkpoint").exists():
+                continue
+            frames, fps, seed, scores = typical_rollout(cell.directory, task)
+            write_gif(videos / f"{task}.gif", frames, fps)
+            from d5rl.runner.report import method_name
+
+            final = cell.final.get("online", cell.final.get("offline"))
+            captions[task] = (f"{method_name(cell.algo)} seed {cell.seed} (final score {final:.3f}); episode seed "
+                              f"{seed}, the median of {len(scores)} "
+                              f"({', '.join(f'{x:.2f}' for x in scores)})")
+            log(f"rollout {task}: {captions[task]}")
+            break
+    _write_captions(videos, captions)
+    return captions
+
+
+def read_captions(videos: Path) -> dict[str, str]:
+    import json
+
+    path = videos / "captions.json"
+    try:
+        return dict(json.loads(path.read_text()))
+    except (OSError, ValueError):
+        return {}
+
+
+def _write_captions(videos: Path, captions: dict[str, str]) -> None:
+    import json
+
+    if captions:
+        videos.mkdir(parents=True, exist_ok=True)
+        (videos / "captions.json").write_text(json.dumps(captions, indent=2, sort_keys=True) + "\n")
