@@ -4,9 +4,10 @@
 current cell with the highest final score (ties: the paper's method order, then the lower seed), restores
 its agent from the cell's checkpoint, runs five evaluation episodes (seeds 0-4, the agent's evaluation
 actions), replays the median-scoring one with the env's render camera (fast render settings, every
-``EVERY``-th step) and writes it to ``videos/<task>.gif``.  Cells whose checkpoint is not on this machine (grids carried between machines keep
-results, not checkpoints) are passed over for the next best; a GIF written earlier is kept when no
-cell of its task has a checkpoint here.  Needs the ``train`` extra (JAX) and a GL backend.
+``EVERY``-th step) and writes it to ``videos/<task>.gif``.  Cells whose checkpoint is not on this
+machine (grids carried between machines keep results, not checkpoints) are passed over for the next
+best; a GIF written earlier is kept when no cell of its task has a checkpoint here.  Needs the
+``train`` extra (JAX) and a GL backend.
 """
 
 from __future__ import annotations
