@@ -27,7 +27,8 @@ class BCAgent(Agent):
     obs_ndim: tuple = nonpytree_field()
 
     def actor_loss(self, actor_params, batch, key):
-        dist = self.actor.apply_fn({"params": actor_params}, batch["observations"], train=True, rngs={"dropout": key})
+        dist = self.actor.apply_fn({"params": actor_params}, self.normalize(batch["observations"]), train=True,
+                                   rngs={"dropout": key})
         loss = -dist.log_prob(batch["actions"]).mean()
         mse = ((dist.mode() - batch["actions"]) ** 2).sum(-1).mean()
         return loss, {"actor/loss": loss, "actor/mse": mse, "actor/log_std": dist.log_std.mean()}
@@ -58,6 +59,9 @@ def get_config() -> Config:
         log_std_min=-5.0,  # clip of the policy's log-std
         log_std_max=2.0,  # upper clip of the policy's log-std
         state_dependent_std=True,  # log-std from the network (False = one learned vector)
+        normalize_observations=False,  # standardise state observations with the dataset's mean and std
+        obs_mean=None,  # per-dimension mean, filled by `d5rl train` when normalizing (None: identity)
+        obs_std=None,  # per-dimension std + 1e-3, filled with obs_mean
         batch_size=256,  # minibatch size (256 state, 64 pixels in D5RL)
         **ENCODER_DEFAULTS,
     )

@@ -57,6 +57,12 @@ def make_train_state(module: nn.Module, key, inputs: tuple, lr: float | optax.Sc
     return state.replace(step=jnp.zeros((), jnp.int32))
 
 
+def observation_stats(observations, eps: float = 1e-3) -> tuple[tuple[float, ...], tuple[float, ...]]:
+    """Per-dimension mean and std + ``eps`` of state observations (TD3+BC's normalization)."""
+    obs = np.asarray(observations, dtype=np.float64)
+    return tuple(float(x) for x in obs.mean(0)), tuple(float(x) for x in obs.std(0) + eps)
+
+
 class Agent(flax.struct.PyTreeNode):
     """Base class.  Subclasses declare ``rng``, their train states, ``config`` and ``obs_ndim``.
 
@@ -78,8 +84,23 @@ class Agent(flax.struct.PyTreeNode):
 
     @classmethod
     def fit_config(cls, config: Config, dataset) -> Config:
-        """The config completed from the training data (e.g. observation statistics); identity here."""
-        return config
+        """The config completed from the training data: the per-dimension mean and std of state
+        observations when the agent's config has ``normalize_observations`` on (TD3+BC's standardisation;
+        pixel observations are left alone)."""
+        if "normalize_observations" not in config or not config.normalize_observations or config.obs_mean is not None:
+            return config
+        obs = dataset.observations
+        if isinstance(obs, dict):
+            return config
+        mean, std = observation_stats(obs)
+        return config.replace(obs_mean=mean, obs_std=std)
+
+    def normalize(self, obs):
+        """State observations standardised with the statistics :meth:`fit_config` put in the config;
+        identity for pixel observations and for agents or runs without statistics."""
+        if isinstance(obs, dict) or "obs_mean" not in self.config or self.config.obs_mean is None:
+            return obs
+        return (obs - jnp.asarray(self.config.obs_mean, jnp.float32)) / jnp.asarray(self.config.obs_std, jnp.float32)
 
     # --- how the loop feeds the agent ---------------------------------------------------------------
     def samples_per_update(self) -> int:
@@ -146,12 +167,12 @@ class Agent(flax.struct.PyTreeNode):
 
     @functools.partial(jax.jit, static_argnames=("temperature",))
     def _sample(self, obs, seed, temperature=1.0):
-        dist = self.actor.apply_fn({"params": self.actor.params}, obs, temperature)
+        dist = self.actor.apply_fn({"params": self.actor.params}, self.normalize(obs), temperature)
         return jnp.clip(dist.sample(seed), -1, 1)
 
     @jax.jit
     def _eval(self, obs, seed):
-        dist = self.actor.apply_fn({"params": self.actor.params}, obs)
+        dist = self.actor.apply_fn({"params": self.actor.params}, self.normalize(obs))
         return jnp.clip(dist.mode(), -1, 1)
 
     # --- config / checkpoints -------------------------------------------------------------------

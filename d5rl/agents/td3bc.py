@@ -31,12 +31,6 @@ def no_actor_metrics():
     return {k: jnp.zeros((), jnp.float32) for k in ACTOR_METRICS}
 
 
-def observation_stats(observations, eps: float = 1e-3) -> tuple[tuple[float, ...], tuple[float, ...]]:
-    """Per-dimension mean and std + ``eps`` of state observations (TD3+BC's normalization)."""
-    obs = np.asarray(observations, dtype=np.float64)
-    return tuple(float(x) for x in obs.mean(0)), tuple(float(x) for x in obs.std(0) + eps)
-
-
 class TD3BCAgent(Agent):
     rng: Any
     actor: Any
@@ -71,24 +65,6 @@ class TD3BCAgent(Agent):
         tau = self.config.tau
         return self.replace(actor=actor, target_actor_params=soft_update(self.target_actor_params, actor.params, tau),
                             target_critic_params=soft_update(self.target_critic_params, self.critic.params, tau)), info
-
-    @classmethod
-    def fit_config(cls, config: Config, dataset) -> Config:
-        """Observation statistics of a state dataset, when ``normalize_observations`` (TD3+BC)."""
-        if not config.normalize_observations or config.obs_mean is not None:
-            return config
-        obs = dataset.observations
-        if isinstance(obs, dict):  # pixels: no normalization
-            return config
-        mean, std = observation_stats(obs)
-        return config.replace(obs_mean=mean, obs_std=std)
-
-    def normalize(self, obs):
-        """State observations standardised with the dataset's mean and std (TD3+BC); identity for
-        pixel observations and when no statistics are configured."""
-        if self.config.obs_mean is None or isinstance(obs, dict):
-            return obs
-        return (obs - jnp.asarray(self.config.obs_mean, jnp.float32)) / jnp.asarray(self.config.obs_std, jnp.float32)
 
     def _critic_step(self, batch):
         """Augment and normalise ``batch``, update the critic; returns ``(agent, batch, metrics)``."""

@@ -22,3 +22,28 @@ def test_bc_fits_deterministic_expert():
     b = ds.sample(256, np.random.default_rng(5))
     err = np.mean(np.sum((np.asarray(agent.eval_actions(b["observations"])) - b["actions"]) ** 2, -1))
     assert err < 0.01
+
+
+def test_bc_standardises_state_observations_when_asked():
+    """normalize_observations (off by default): fit_config fills the dataset's mean and std, the loss and
+    the policy see (obs - mean) / std, so a dataset shifted by a constant trains to the same policy."""
+    from d5rl.agents.bc import BCAgent
+    from tests.agents.helpers import small_config
+
+    assert BCAgent.fit_config(small_config("bc"), toy_dataset(5)).obs_mean is None  # default: off
+
+    def policy(shift: float, normalize: bool):
+        ds = toy_dataset(50)
+        ds.arrays["observations"] = ds.arrays["observations"] + np.float32(shift)
+        cfg = BCAgent.fit_config(small_config("bc", normalize_observations=normalize), ds)
+        if normalize:
+            obs = np.asarray(ds.observations, np.float64)
+            np.testing.assert_allclose(cfg.obs_mean, obs.mean(0), rtol=1e-6)
+            np.testing.assert_allclose(cfg.obs_std, obs.std(0) + 1e-3, rtol=1e-6)
+        b = ds.sample(1, np.random.default_rng(0))
+        agent, _ = train(BCAgent.create(0, b["observations"], b["actions"], cfg), ds, chunks=1, chunk=60)
+        probe = toy_dataset(2, seed=9).observations[:16] + np.float32(shift)
+        return np.asarray(agent.eval_actions(probe))
+
+    assert np.abs(policy(0.0, True) - policy(50.0, True)).max() < 1e-2
+    assert np.abs(policy(0.0, False) - policy(50.0, False)).max() > 0.1

@@ -1,6 +1,6 @@
 import numpy as np
 
-from d5rl.agents.td3bc import observation_stats
+from d5rl.agents.common import observation_stats
 from d5rl.envs.toy.data import toy_dataset
 from tests.agents.helpers import dataset, make_agent, train
 
