@@ -87,7 +87,7 @@ class Agent(flax.struct.PyTreeNode):
         """The config completed from the training data: the per-dimension mean and std of state
         observations when the agent's config has ``normalize_observations`` on (TD3+BC's standardisation;
         pixel observations are left alone)."""
-        if "normalize_observations" not in config or not config.normalize_observations or config.obs_mean is not None:
+        if not config.get("normalize_observations") or config.get("obs_mean") is not None:
             return config
         obs = dataset.observations
         if isinstance(obs, dict):
@@ -98,7 +98,7 @@ class Agent(flax.struct.PyTreeNode):
     def normalize(self, obs):
         """State observations standardised with the statistics :meth:`fit_config` put in the config;
         identity for pixel observations and for agents or runs without statistics."""
-        if isinstance(obs, dict) or "obs_mean" not in self.config or self.config.obs_mean is None:
+        if isinstance(obs, dict) or self.config.get("obs_mean") is None:
             return obs
         return (obs - jnp.asarray(self.config.obs_mean, jnp.float32)) / jnp.asarray(self.config.obs_std, jnp.float32)
 
