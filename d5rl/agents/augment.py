@@ -13,6 +13,7 @@ from __future__ import annotations
 
 import jax
 import jax.numpy as jnp
+import numpy as np
 
 from d5rl.agents.encoders import pixel_keys
 
@@ -29,8 +30,11 @@ def random_shift(key, imgs, pad: int = 4):
     return jax.vmap(crop)(padded, offsets)
 
 
-_RGB_TO_YIQ = jnp.array([[0.299, 0.587, 0.114], [0.596, -0.274, -0.322], [0.211, -0.523, 0.312]])
-_YIQ_TO_RGB = jnp.linalg.inv(_RGB_TO_YIQ)
+# numpy constants: a module-level jnp array would start a JAX backend on import, and processes that only
+# import agents (the bench parent) would then hold an accelerator's memory (see tests/runner).
+_RGB_TO_YIQ_64 = np.array([[0.299, 0.587, 0.114], [0.596, -0.274, -0.322], [0.211, -0.523, 0.312]])
+_RGB_TO_YIQ = _RGB_TO_YIQ_64.astype(np.float32)
+_YIQ_TO_RGB = np.linalg.inv(_RGB_TO_YIQ_64).astype(np.float32)
 _LUMA = _RGB_TO_YIQ[0]  # Rec. 601 luma weights; they sum to 1
 
 

@@ -279,3 +279,29 @@ def test_datasets_are_generated_once_before_the_cells(tmp_path):
     cells = expand_grid([spec.id], ["bc"], [0], 10, 0, job=DEFAULT_JOB, tuned=False)
     assert prepare_datasets(cells, workers=1, progress=False) == {}
     assert json.loads((root / "manifest.json").read_text())["num_episodes"] == 8
+
+
+def test_bench_parent_never_starts_a_jax_backend():
+    """The bench parent resolves every agent's settings but must not start JAX: on a GPU, a parent that
+    did would hold most of the card's memory (XLA preallocates) for the whole grid and its workers would
+    fail with CUDA out of memory (seen on an H100 with 6 workers). A backend that cannot start (a TPU,
+    here) makes any backend start in the child raise."""
+    code = (
+        "from d5rl.agents import AGENTS, get_agent\n"
+        "from d5rl.runner import expand_grid\n"
+        "from d5rl.settings import resolve\n"
+        "for name in AGENTS:\n"
+        "    get_agent(name)\n"
+        "    for task in ('toy-reach-pixels-v0', 'toy-reach-v0'):\n"
+        "        resolve(name, task)\n"
+        "expand_grid(['toy-reach-pixels-v0', 'a1-walk-v0'], list(AGENTS), [0], 100, 100)\n"
+        "import jax\n"
+        "try:\n"
+        "    jax.devices()\n"
+        "except RuntimeError:\n"
+        "    print('no backend started')\n"
+    )
+    env = {**os.environ, "JAX_PLATFORMS": "tpu", "PYTHONPATH": str(REPO)}
+    out = subprocess.run([sys.executable, "-c", code], env=env, capture_output=True, text=True, timeout=300)
+    assert out.returncode == 0, out.stderr[-2000:]
+    assert "no backend started" in out.stdout
