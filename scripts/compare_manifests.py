@@ -1,17 +1,33 @@
-"""Compare the shard checksums of two manifests of one dataset (e.g. generated on two machines): `python scripts/compare_manifests.py MINE.json REFERENCE.json`."""
-import json, sys
+"""Compare the array checksums of two manifests of one dataset, e.g. generated on two machines.
+
+    python scripts/compare_manifests.py MINE/manifest.json REFERENCE/manifest.json
+
+Prints how many arrays are byte-identical, which shards differ, and each side's package versions
+(README, "Determinism, and its limit").
+"""
+
+from __future__ import annotations
+
+import json
+import sys
 from pathlib import Path
-mine = json.loads(Path(sys.argv[1]).read_text())
-ref = json.loads(Path(sys.argv[2]).read_text())
-same = diff = 0
-first = None
-for a, b in zip(mine["shards"], ref["shards"]):
-    for k, v in b["arrays"].items():
-        if a["arrays"].get(k, {}).get("sha256") == v["sha256"]:
-            same += 1
-        else:
-            diff += 1
-            first = first or k
-print(f"determinism {mine['dataset']}: {len(mine['shards'])}/{len(ref['shards'])} shards, "
-      f"{same} arrays byte-identical to the reference, {diff} differ (first: {first}); "
-      f"transitions {mine['num_transitions']} vs {ref['num_transitions']}; packages here {mine.get('packages')}")
+
+
+def compare(mine: dict, ref: dict) -> str:
+    same, differing, first = 0, [], None
+    for i, (a, b) in enumerate(zip(mine["shards"], ref["shards"])):
+        bad = [k for k, v in b["arrays"].items() if a["arrays"].get(k, {}).get("sha256") != v["sha256"]]
+        same += len(b["arrays"]) - len(bad)
+        if bad:
+            differing.append(i)
+            first = first or bad[0]
+    return (f"{mine['dataset']}: {len(mine['shards'])}/{len(ref['shards'])} shards compared, {same} arrays "
+            f"byte-identical, shards with differences {differing or 'none'} (first array: {first}); "
+            f"transitions {mine['num_transitions']} vs {ref['num_transitions']}; "
+            f"packages {mine.get('packages')} vs {ref.get('packages')}")
+
+
+if __name__ == "__main__":
+    if len(sys.argv) != 3:
+        sys.exit(__doc__)
+    print(compare(*(json.loads(Path(p).read_text()) for p in sys.argv[1:])))
