@@ -8,9 +8,10 @@ Prints how many arrays are byte-identical, which shards differ, and each side's 
 
 from __future__ import annotations
 
-import json
 import sys
 from pathlib import Path
+
+from d5rl.datasets.format import read_manifest
 
 
 def compare(mine: dict, ref: dict) -> str:
@@ -30,4 +31,4 @@ def compare(mine: dict, ref: dict) -> str:
 if __name__ == "__main__":
     if len(sys.argv) != 3:
         sys.exit(__doc__)
-    print(compare(*(json.loads(Path(p).read_text()) for p in sys.argv[1:])))
+    print(compare(*(read_manifest(Path(p)) for p in sys.argv[1:])))

@@ -17,7 +17,7 @@ if [ -z "$LOCAL" ]; then
   nvidia-smi --query-gpu=name,memory.total,driver_version --format=csv; nproc; free -g | head -2
 fi
 versions() { python3 -c "import jax, flax, optax, mujoco, numpy; print('versions', jax.__version__, flax.__version__, optax.__version__, mujoco.__version__, numpy.__version__, jax.devices())"; }
-smoke() { timeout 150 python3 -c 'import sys; from d5rl.cli import main; sys.exit(main())' train iql toy-reach-pixels-v0 --offline-steps 20 --set eval_episodes=2 --set log_interval=10 --run-dir /tmp/smoke > /tmp/smoke.log 2>&1; }
+smoke() { timeout 150 python3 -m d5rl.cli train iql toy-reach-pixels-v0 --offline-steps 20 --set eval_episodes=2 --set log_interval=10 --run-dir /tmp/smoke > /tmp/smoke.log 2>&1; }
 versions || exit 4
 if ! smoke; then
   tail -15 /tmp/smoke.log; stamp "smoke failed with carried flax/optax: trying the image's"
@@ -25,7 +25,7 @@ if ! smoke; then
 fi
 stamp "smoke ok: $(grep -o '"score": [0-9.]*' /tmp/smoke.log | tail -1)"
 for t in kitchen-standard-mixed-v0 wx-sorting-v0; do
-  s=$(date +%s); timeout $(( $(left) - 200 )) python3 -c 'import sys; from d5rl.cli import main; sys.exit(main())' generate $t --workers 16 2>&1 | tr '\r' '\n' | grep -v "it/s\|ep/s" | tail -3
+  s=$(date +%s); timeout $(( $(left) - 200 )) python3 -m d5rl.cli generate $t --workers 16 2>&1 | tr '\r' '\n' | grep -v "it/s\|ep/s" | tail -3
   stamp "generate+render $t: $(( $(date +%s) - s )) s"
 done
 python3 scripts/compare_manifests.py /tmp/d5rl/datasets/kitchen-standard/v1-seed0/manifest.json .dcache/kitchen-standard.json
@@ -33,8 +33,8 @@ python3 scripts/compare_manifests.py /tmp/d5rl/datasets/wx-sorting/v2-seed0/mani
 du -sh /tmp/d5rl/datasets/*/*/renders/* 2>/dev/null
 L=$(( $(left) - 40 )); stamp "benches with ${L}s"
 B="--seeds 0-1 --offline-steps ${STEPS:-5000} --no-report --no-progress $EXTRA"
-timeout $L python3 -c 'import sys; from d5rl.cli import main; sys.exit(main())' bench --tasks kitchen-standard-mixed-v0 --algos iql $B --workers 2 --out /tmp/cells/k > /tmp/bk.log 2>&1 &
-timeout $L python3 -c 'import sys; from d5rl.cli import main; sys.exit(main())' bench --tasks wx-sorting-v0 --algos bc iql $B --workers 4 --out /tmp/cells/w > /tmp/bw.log 2>&1 &
+timeout $L python3 -m d5rl.cli bench --tasks kitchen-standard-mixed-v0 --algos iql $B --workers 2 --out /tmp/cells/k > /tmp/bk.log 2>&1 &
+timeout $L python3 -m d5rl.cli bench --tasks wx-sorting-v0 --algos bc iql $B --workers 4 --out /tmp/cells/w > /tmp/bw.log 2>&1 &
 while [ -n "$(jobs -r)" ]; do sleep 30; stamp "$(nvidia-smi --query-gpu=utilization.gpu,memory.used --format=csv,noheader 2>/dev/null) load $(cut -d' ' -f1 /proc/loadavg)"; done
 tail -n 4 /tmp/bk.log /tmp/bw.log
 python3 - <<'PY'
