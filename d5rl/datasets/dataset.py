@@ -47,7 +47,9 @@ class ChunkedArray:
         return self.shape[0]
 
     def __array__(self, dtype=None, copy=None):
-        out = np.concatenate(self.chunks, axis=0)
+        out = np.empty(self.shape, self.dtype)
+        for chunk, a, b in zip(self.chunks, self.starts, self.ends):
+            out[a:b] = chunk
         return out if dtype is None else out.astype(dtype)
 
     def __getitem__(self, idx):
@@ -152,11 +154,13 @@ class Dataset:
         first = self.episode_step_starts[episodes]
         rows = np.maximum(steps[:, None] - np.arange(k - 1, -1, -1), first[:, None])
         frames = arr[rows.reshape(-1)].reshape(rows.shape + arr.shape[1:])  # one gather (one decode per chunk)
-        c = frames.shape[-1]
-        out = np.empty(frames.shape[:1] + frames.shape[2:-1] + (k * c,), frames.dtype)
-        for j in range(k):
-            out[..., j * c: (j + 1) * c] = frames[:, j]
-        return out
+        *_, c = frames.shape
+        # (B, k, H, W, C) -> (B, H, W, k*C): one transposed copy of whole pixels (C bytes as one opaque
+        # item), ~2x faster than k strided copies of C-byte runs
+        pixel = np.dtype((np.void, c * frames.dtype.itemsize))
+        out = np.empty(frames.shape[:1] + frames.shape[2:-1] + (k,), pixel)
+        out[...] = np.moveaxis(np.ascontiguousarray(frames).view(pixel)[..., 0], 1, -1)
+        return out.view(frames.dtype).reshape(out.shape[:-1] + (k * c,))
 
     def _obs_pair(self, steps: np.ndarray, frame_stack: int, episodes: np.ndarray):
         """Observations at ``steps`` and ``steps + 1``; stacked frames of both come from one gather of
@@ -192,6 +196,10 @@ class Dataset:
         raise AttributeError(f"{type(self).__name__} has no attribute {name!r}")
 
     # --- sampling ---------------------------------------------------------------------------------
+    def draw_indices(self, batch_size: int, rng: np.random.Generator) -> np.ndarray:
+        """The transitions of a random batch: all that :meth:`sample` draws from ``rng``."""
+        return rng.integers(0, self.num_transitions, size=batch_size)
+
     def sample(
         self,
         batch_size: int,
@@ -213,7 +221,7 @@ class Dataset:
         ``mc_returns`` when ``mc_gamma`` is given; ``next_actions`` (the data's action at the next
         step of the same episode; an episode's last transition repeats its own) when asked.
         """
-        idx = rng.integers(0, self.num_transitions, size=batch_size) if indices is None else np.asarray(indices)
+        idx = self.draw_indices(batch_size, rng) if indices is None else np.asarray(indices)
         eps = self.transition_episode[idx]
         batch: dict[str, Any] = {
             "actions": self.arrays["actions"][idx],

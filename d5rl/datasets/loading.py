@@ -63,6 +63,7 @@ def load_dataset(
     episodes: int | None = None,
     generate: bool = True,
     in_memory: bool | str = "auto",
+    memory_limit_bytes: int | None = None,
     obs_keys: list[str] | None = None,
     workers: int | None = None,
     progress: bool = True,
@@ -72,7 +73,9 @@ def load_dataset(
 
     ``episodes`` takes the first N episodes (a smaller dataset is a prefix of the
     full one).  ``in_memory``: True reads everything into RAM, False keeps every
-    array memory-mapped, "auto" reads arrays up to 1 GiB.  Extra keyword arguments
+    array memory-mapped, "auto" reads arrays up to ``memory_limit_bytes`` (default 1 GiB;
+    compressed camera frames read into RAM are decoded once instead of at every batch, see
+    the trainer's ``dataset_in_memory_gb``).  Extra keyword arguments
     go to the dataset's derived-cache builder (e.g. ``cameras=``, ``size=`` for
     rendered frames).
 
@@ -89,12 +92,15 @@ def load_dataset(
     seed = generation.check_seed(dspec.default_seed if seed is None else seed)
     wanted = generation.check_episodes(episodes, dspec)
     root = generation.dataset_root(dspec, seed)
+    limit = IN_MEMORY_LIMIT_BYTES if memory_limit_bytes is None else int(memory_limit_bytes)
+    if limit < 0:
+        raise ValueError(f"memory_limit_bytes must be >= 0, got {memory_limit_bytes}")
     if episodes is None and not generate and (root / fmt.MANIFEST).exists():
         wanted = min(wanted, fmt.read_manifest(root / fmt.MANIFEST)["num_episodes"]) or wanted  # what is there
     for attempt in range(3):
         try:
-            return _open(spec, dspec, seed, root, wanted, episodes is not None, in_memory, obs_keys, workers,
-                         progress, derived_kwargs)
+            return _open(spec, dspec, seed, root, wanted, episodes is not None, in_memory, limit, obs_keys,
+                         workers, progress, derived_kwargs)
         except _NotReady as e:
             if not generate or attempt == 2:
                 raise e.error from None
@@ -104,7 +110,7 @@ def load_dataset(
     raise AssertionError("unreachable")
 
 
-def _open(spec, dspec, seed, root, wanted, partial, in_memory, obs_keys, workers, progress, derived_kwargs):
+def _open(spec, dspec, seed, root, wanted, partial, in_memory, limit, obs_keys, workers, progress, derived_kwargs):
     from d5rl.datasets import generation
 
     manifest_path = root / fmt.MANIFEST
@@ -171,7 +177,7 @@ def _open(spec, dspec, seed, root, wanted, partial, in_memory, obs_keys, workers
         arrays: dict[str, Any] = {}
         for key, parts in chunks.items():
             arr = ChunkedArray(parts)
-            load = in_memory is True or (in_memory == "auto" and arr.nbytes <= IN_MEMORY_LIMIT_BYTES)
+            load = in_memory is True or (in_memory == "auto" and arr.nbytes <= limit)
             arrays[key] = np.asarray(arr) if load else (parts[0] if len(parts) == 1 else arr)
     lengths = np.array([x for r in records for x in r["episode_lengths"]][:n])
     meta = [m for r in records for m in r["episode_meta"]][:n]

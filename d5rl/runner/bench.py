@@ -29,7 +29,7 @@ from d5rl.files import write_atomic
 from d5rl.parallel import configure_worker
 from d5rl.runner.execute import (EXIT_CODES, LOG_FILE, clear_job_outputs, execute_cell, is_done, read_failures,
                                  record_failure, reset_cell, write_cell_file)
-from d5rl.runner.grid import DEFAULT_JOB, Cell, GridError, read_cell, stale_reason
+from d5rl.runner.grid import DEFAULT_JOB, Cell, GridError, read_cell, same_run, stale_reason
 
 BENCH_FILE = "bench.json"
 
@@ -67,15 +67,15 @@ def prepare(cells: Iterable[Cell], run_dir: Path | str, argv: list[str] | None =
     cells = list(cells)
     for cell in cells:
         cdir = cell.directory(run_dir)
-        old = read_cell(cdir)
-        if old is not None and old != cell and is_done(cdir):
+        old, done = read_cell(cdir), is_done(cdir)
+        if old is not None and not same_run(old, cell) and done:
             diff = {k: (v, getattr(cell, k)) for k, v in old.to_json().items() if v != getattr(cell, k)}
             raise GridError(
                 f"cell {cell.key} in {run_dir} already finished with other settings: {diff}",
                 "write this grid to a new --out directory, or delete that cell's directory to rerun it",
             )
-        if old != cell:
-            if old is not None:  # new settings for an unfinished cell: its partial outputs are stale
+        if old != cell and not done:  # a finished cell keeps the record of how it ran
+            if old is not None and not same_run(old, cell):  # new settings: its partial outputs are stale
                 clear_job_outputs(cdir)
             write_cell_file(cell, cdir)
     log_path = run_dir / BENCH_FILE

@@ -79,6 +79,17 @@ class Cell:
         return cls(**{k: v for k, v in d.items() if k in fields})
 
 
+def same_run(a: Cell, b: Cell) -> bool:
+    """Whether two cells compute the same thing: equal but for ``--set`` values of the trainer's
+    execution-only settings (:data:`d5rl.training.config.EXECUTION_KEYS`: checkpoints, RAM, progress)."""
+    from d5rl.training.config import EXECUTION_KEYS
+
+    def what(c: Cell) -> dict:
+        return {**c.to_json(), "overrides": {k: v for k, v in c.overrides.items() if k not in EXECUTION_KEYS}}
+
+    return what(a) == what(b)
+
+
 def parse_assignments(items: Iterable[str] | None) -> dict[str, str]:
     """``["expectile=0.9"]`` -> ``{"expectile": "0.9"}``: the text is kept; the trainer parses it as the type
     of the setting's default (:meth:`d5rl.agents.config.Config.override`, the one parser)."""

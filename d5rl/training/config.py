@@ -25,11 +25,17 @@ def get_train_config() -> Config:
         start_steps=None,  # random-action env steps before online updates (None = agent's start_steps, else 0)
         buffer_capacity=None,  # online replay capacity (None = online_steps; pixels: at most 20k, ~3 GB at 64²×2 cams)
         dataset_episodes=None,  # train on the first N dataset episodes (None = all)
+        dataset_in_memory_gb=None,  # read dataset arrays up to this size into RAM (None = 1 GiB): camera frames
+        # held in RAM are decoded once, not at every batch (several x faster sampling where RAM allows)
         save_video=False,  # record the first episode of every evaluation
         tensorboard=True,  # also write TensorBoard events if tensorboardX / torch is installed
         progress=True,  # tqdm progress bar with updates/s
     )
 
+
+# Settings that change how a run executes, never what it computes (a grid may resume or rerun a cell with
+# other values of these and it stays the same cell).
+EXECUTION_KEYS = ("checkpoint_interval", "dataset_in_memory_gb", "progress", "tensorboard")
 
 # What each training setting may be (checked before any work; see get_train_config for meanings).
 TRAIN_BOUNDS = {
@@ -38,7 +44,7 @@ TRAIN_BOUNDS = {
     "log_interval": Bound(int, ge=1), "checkpoint_interval": Bound(int, ge=1), "updates_per_call": Bound(int, ge=1),
     "frame_stack": Bound(int, ge=1, optional=True), "offline_ratio": Bound(float, ge=0, le=1, optional=True),
     "start_steps": Bound(int, ge=0, optional=True), "buffer_capacity": Bound(int, ge=1, optional=True),
-    "dataset_episodes": Bound(int, ge=1, optional=True),
+    "dataset_episodes": Bound(int, ge=1, optional=True), "dataset_in_memory_gb": Bound(float, ge=0, optional=True),
 }
 
 

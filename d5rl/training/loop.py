@@ -36,7 +36,8 @@ from d5rl.training.checkpoint import Checkpoint, load_checkpoint, restore_agent,
 from d5rl.training.config import check_run
 from d5rl.training.envs import load_task_dataset, make_task_env
 from d5rl.training.logger import Logger
-from d5rl.training.parts import Evaluator, Metrics, NonFiniteLossError, RunState, Sampler, as_batch, crossed
+from d5rl.training.parts import (Evaluator, Metrics, NonFiniteLossError, Prefetcher, RunState, Sampler, as_batch,
+                                 crossed)
 from d5rl.training.replay import ReplayBuffer
 
 __all__ = ["NonFiniteLossError", "RunDirError", "load_run", "train"]
@@ -116,7 +117,8 @@ def train(
     cfg, agent_cls = settings.train, get_agent(settings.algo)[0]
     run_dir = Path(run_dir) if run_dir is not None else default_run_dir(settings.algo, task_id, seed)
     ds = dataset if dataset is not None else load_task_dataset(
-        task_id, **({"episodes": cfg.dataset_episodes} if cfg.dataset_episodes else {}))
+        task_id, **({"episodes": cfg.dataset_episodes} if cfg.dataset_episodes else {}),
+        **({"memory_limit_bytes": int(cfg.dataset_in_memory_gb * 2**30)} if cfg.dataset_in_memory_gb is not None else {}))
     run_dir.mkdir(parents=True, exist_ok=True)
 
     agent_cfg = agent_cls.fit_config(settings.agent, ds)
@@ -194,14 +196,25 @@ def _start(run: Run, resume: Checkpoint | None) -> tuple[Any, RunState]:
 
 
 def offline_phase(run: Run, agent, state: RunState):
-    """``offline_steps`` updates on dataset batches (state agents: several per jit call)."""
+    """``offline_steps`` updates on dataset batches (state agents: several per jit call; pixel agents: one,
+    on batches whose frames are gathered ahead in background threads)."""
+    n_batch = agent.samples_per_update()
+    if run.pixels and state.step < run.offline_steps:
+        with Prefetcher(run.sampler, n_batch, state.rng) as batches:
+            return _offline_updates(run, agent, state, 1, batches.next)
+    k = max(1, int(run.cfg.updates_per_call))
+    return _offline_updates(run, agent, state, k, lambda: run.sampler.sample(n_batch, state.rng))
+
+
+def _offline_updates(run: Run, agent, state: RunState, k: int, next_batch):
+    """The offline loop: ``k`` updates per jit call (``update_many`` on stacked batches), else one per
+    ``next_batch()``."""
     cfg, metrics = run.cfg, Metrics(state, run.logger, run.cfg.log_interval, run.bar)
-    k = 1 if run.pixels else max(1, int(cfg.updates_per_call))
     n_batch, total = agent.samples_per_update(), run.offline_steps + run.online_steps
     while state.step < run.offline_steps:
         n = min(k - state.step % k, run.offline_steps - state.step)
         if n == 1:
-            agent, info = agent.update_donated(run.sampler.sample(n_batch, state.rng))
+            agent, info = agent.update_donated(next_batch())
         else:
             agent, info = agent.update_many(run.sampler.sample_stacked(n, n_batch, state.rng))
         prev, state.step = state.step, state.step + n

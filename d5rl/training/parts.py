@@ -1,11 +1,13 @@
 """The parts :func:`d5rl.training.loop.train` is composed of: the run's changing state (checkpointed
-as one object), the offline batch sampler, the metric accumulator and the evaluator."""
+as one object), the offline batch sampler (and its prefetcher), the metric accumulator and the evaluator."""
 
 from __future__ import annotations
 
+import collections
 import dataclasses
 import math
 import time
+from concurrent.futures import ThreadPoolExecutor
 from pathlib import Path
 from typing import Any
 
@@ -66,17 +68,59 @@ class Sampler:
         self.keys = BATCH_KEYS + tuple(extra_keys)
         self.mc_gamma = float(discount) if "mc_returns" in self.keys else None
 
-    def sample(self, n: int, rng: np.random.Generator) -> dict:
+    def sample(self, n: int, rng: np.random.Generator | None, indices: np.ndarray | None = None) -> dict:
+        """A batch of ``n`` random transitions (or of ``indices``, drawn earlier from ``rng``)."""
         extra = {"mc_gamma": self.mc_gamma} if self.mc_gamma is not None else {}
         if "next_actions" in self.keys:
             extra["next_actions"] = True
-        b = self.dataset.sample(n, rng, frame_stack=self.frame_stack, **extra)
+        b = self.dataset.sample(n, rng, frame_stack=self.frame_stack, indices=indices, **extra)
         return as_batch(b, self.keys)
 
     def sample_stacked(self, k: int, n: int, rng: np.random.Generator) -> dict:
         """``k`` batches of ``n`` on a leading axis (for ``update_many``)."""
         batch = self.sample(k * n, rng)
         return jax.tree_util.tree_map(lambda x: x.reshape((k, n) + x.shape[1:]), batch)
+
+
+class Prefetcher:
+    """Batches of ``n`` from a :class:`Sampler`, assembled ahead of use by ``threads`` background threads
+    (pixel runs: gathering and stacking frames, which releases the GIL, overlaps the device's update).
+
+    The batches are exactly those of calling ``sampler.sample(n, rng)`` in turn: the transitions are
+    drawn here, in order, from a copy of ``rng``, and :meth:`next` leaves ``rng`` in the state after the
+    batch it returns, so a checkpoint stores the state of the first batch not yet trained on and a
+    resumed run trains on the same batches.  Only the gathering runs ahead."""
+
+    def __init__(self, sampler: Sampler, n: int, rng: np.random.Generator, threads: int = 2, depth: int = 4):
+        self.sampler, self.n, self.rng, self.depth = sampler, int(n), rng, int(depth)
+        self._ahead = np.random.default_rng()
+        self._ahead.bit_generator.state = rng.bit_generator.state
+        self._pool = ThreadPoolExecutor(max(1, int(threads)), thread_name_prefix="d5rl-batches")
+        self._pending: collections.deque = collections.deque()
+
+    def _submit(self) -> None:
+        idx = self.sampler.dataset.draw_indices(self.n, self._ahead)
+        job = self._pool.submit(lambda: jax.device_put(self.sampler.sample(self.n, None, indices=idx)))
+        self._pending.append((job, self._ahead.bit_generator.state))
+
+    def next(self) -> dict:
+        while len(self._pending) < self.depth:
+            self._submit()
+        job, after = self._pending.popleft()
+        batch = job.result()  # re-raises an error of the thread that gathered it
+        self.rng.bit_generator.state = after
+        self._submit()
+        return batch
+
+    def close(self) -> None:
+        self._pool.shutdown(wait=True, cancel_futures=True)
+        self._pending.clear()
+
+    def __enter__(self) -> "Prefetcher":
+        return self
+
+    def __exit__(self, *exc) -> None:
+        self.close()
 
 
 def as_batch(b: dict, keys) -> dict:

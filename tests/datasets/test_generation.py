@@ -101,6 +101,17 @@ def test_memory_mapped_view_equals_in_memory():
         np.testing.assert_array_equal(ba[k], bb[k])
 
 
+def test_memory_limit_decides_what_is_read_into_ram():
+    spec = register_toy("lim", num_episodes=5, per_shard=5)
+    on_disk = load_dataset(spec, memory_limit_bytes=0, progress=False)
+    in_ram = load_dataset(spec, memory_limit_bytes=1 << 40, progress=False)
+    assert isinstance(on_disk.arrays["observations"], np.memmap)
+    assert type(in_ram.arrays["observations"]) is np.ndarray
+    np.testing.assert_array_equal(on_disk.arrays["observations"], in_ram.arrays["observations"])
+    with pytest.raises(ValueError, match="memory_limit_bytes"):
+        load_dataset(spec, memory_limit_bytes=-1, progress=False)
+
+
 def test_prefix_and_extension_share_bytes(tmp_path, monkeypatch):
     spec = register_toy("ext", num_episodes=10, per_shard=4)
     small = load_dataset(spec, episodes=5, progress=False)

@@ -102,3 +102,38 @@ def test_replay_buffer_next_actions_stay_within_episodes():
             buf.insert(obs, np.array([a]), 0.0, 1.0, obs)
         buf.end_episode()
     np.testing.assert_array_equal(buf.data["next_actions"][:5, 0], [2, 3, 3, 8, 8])  # the last step repeats its own
+
+
+def test_prefetched_batches_are_the_sequential_ones():
+    """Gathering ahead in threads changes nothing a run sees: the same batches in the same order, and the
+    run's generator after each batch in the state a plain ``sample`` leaves it (what checkpoints save)."""
+    from d5rl.envs.toy.data import toy_dataset
+    from d5rl.training.parts import Prefetcher, Sampler
+
+    sampler = Sampler(toy_dataset(6, pixels=True), 3, ("mc_returns",), 0.9)
+    plain, ahead = np.random.default_rng(5), np.random.default_rng(5)
+    with Prefetcher(sampler, 16, ahead, threads=3, depth=4) as batches:
+        for _ in range(7):
+            want, got = sampler.sample(16, plain), batches.next()
+            assert ahead.bit_generator.state == plain.bit_generator.state
+            assert got["observations"]["pixels/front"].shape == (16, 16, 16, 9)  # 3 stacked RGB frames
+            for key in ("observations", "next_observations"):
+                for part in want[key]:
+                    np.testing.assert_array_equal(np.asarray(got[key][part]), want[key][part])
+            for key in ("actions", "rewards", "masks", "mc_returns"):
+                np.testing.assert_array_equal(np.asarray(got[key]), want[key])
+
+
+def test_a_failed_prefetch_raises_in_the_training_thread():
+    import pytest
+
+    from d5rl.envs.toy.data import toy_dataset
+    from d5rl.training.parts import Prefetcher, Sampler
+
+    class Broken(Sampler):
+        def sample(self, n, rng, indices=None):
+            raise OSError("disk went away")
+
+    with Prefetcher(Broken(toy_dataset(2, pixels=True), 3, (), 0.9), 4, np.random.default_rng(0)) as batches:
+        with pytest.raises(OSError, match="disk went away"):
+            batches.next()
