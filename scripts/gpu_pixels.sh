@@ -7,7 +7,8 @@
 # The machine needs, in the checkout (git-ignored, prepared where pip works): .gl/ (libEGL/libGL .debs),
 # .whl/ (cp312 wheels of mujoco, mujoco-core, gymnasium, zstandard, xacro, flax, optax, ...), .assets/
 # (the extracted robot models, D5RL_ASSETS) and .dcache/{kitchen-standard,wx-sorting}.json (this
-# machine's manifests, to compare the regenerated data).  Cells come back in $OUT/cells.tgz.
+# machine's manifests, to compare the regenerated data).  Cells come back in $OUT/cells.tgz, with
+# their final checkpoints (for the report's rollout GIFs, or to evaluate again where a lease ended mid-evaluation).
 T0=$(date +%s); BUDGET=${BUDGET:-540}; W=$PWD/.dwork
 left() { echo $(( BUDGET - ($(date +%s) - T0) )); }
 stamp() { echo "[$(( $(date +%s) - T0 ))s] $*"; }
@@ -48,5 +49,5 @@ for d in sorted(glob.glob(sys.argv[1] + "/*/*/*/seed*")):
     print(d, "steps", rows[-1].get("step") if rows else None, "ups", ups[-3:], "wall", done.get("wall_s"),
           "score", done.get("summary", {}).get("score"))
 PY
-tar czf $OUT/cells.tgz --exclude='checkpoint*' --exclude='.lock' --exclude='.worker.json' -C $W/cells . && ls -la $OUT
+tar czf $OUT/cells.tgz --exclude='checkpoint.prev' --exclude='.checkpoint.tmp-*' --exclude='.lock' --exclude='.worker.json' -C $W/cells . && ls -la $OUT
 stamp done
