@@ -30,31 +30,28 @@ def rows(run_dir):
     return out
 
 
-def test_offline_resume_is_exact(tmp_path):
-    ds = toy_dataset(20)
-    kw = overrides(checkpoint_interval=32, eval_interval=1000, updates_per_call=8)
-    full = train("td3bc", "toy-reach-v0", 96, 0, 1, kw, tmp_path / "a", dataset=ds)
-    with pytest.raises(KeyboardInterrupt), interrupt_after_checkpoint(56):
-        train("td3bc", "toy-reach-v0", 96, 0, 1, kw, tmp_path / "b", dataset=ds)
-    resumed = train("td3bc", "toy-reach-v0", 96, 0, 1, kw, tmp_path / "b", dataset=ds)
+def assert_offline_resume_is_exact(tmp_path, algo, task, steps, kw, ds, interrupt_at):
+    """A run killed after its checkpoint at ``interrupt_at`` and resumed ends where an unbroken run does."""
+    full = train(algo, task, steps, 0, 1, kw, tmp_path / "a", dataset=ds)
+    with pytest.raises(KeyboardInterrupt), interrupt_after_checkpoint(interrupt_at):
+        train(algo, task, steps, 0, 1, kw, tmp_path / "b", dataset=ds)
+    resumed = train(algo, task, steps, 0, 1, kw, tmp_path / "b", dataset=ds)
     for a, b in zip(leaves(full["agent"]), leaves(resumed["agent"])):
         np.testing.assert_array_equal(a, b)
     assert rows(tmp_path / "a") == rows(tmp_path / "b")
+
+
+def test_offline_resume_is_exact(tmp_path):
+    kw = overrides(checkpoint_interval=32, eval_interval=1000, updates_per_call=8)
+    assert_offline_resume_is_exact(tmp_path, "td3bc", "toy-reach-v0", 96, kw, toy_dataset(20), 56)
 
 
 @pytest.mark.slow  # ~1 min of pixel compiles; test_parts pins the generator contract it relies on in seconds
 def test_pixel_offline_resume_is_exact_with_batches_gathered_ahead(tmp_path):
     """Pixel runs gather batches in background threads; a checkpoint still stores the generator state of
     the first batch not trained on, so a resumed run trains on the same batches."""
-    ds = toy_dataset(6, pixels=True)
     kw = overrides(checkpoint_interval=6, eval_interval=1000, batch_size=8, eval_episodes=1, eval_envs=1)
-    full = train("bc", "toy-reach-pixels-v0", 12, 0, 1, kw, tmp_path / "a", dataset=ds)
-    with pytest.raises(KeyboardInterrupt), interrupt_after_checkpoint(6):
-        train("bc", "toy-reach-pixels-v0", 12, 0, 1, kw, tmp_path / "b", dataset=ds)
-    resumed = train("bc", "toy-reach-pixels-v0", 12, 0, 1, kw, tmp_path / "b", dataset=ds)
-    for a, b in zip(leaves(full["agent"]), leaves(resumed["agent"])):
-        np.testing.assert_array_equal(a, b)
-    assert rows(tmp_path / "a") == rows(tmp_path / "b")
+    assert_offline_resume_is_exact(tmp_path, "bc", "toy-reach-pixels-v0", 12, kw, toy_dataset(6, pixels=True), 6)
 
 
 def test_online_resume_is_exact_for_rlpd(tmp_path):
