@@ -156,7 +156,7 @@ class Dataset:
         frames = arr[rows.reshape(-1)].reshape(rows.shape + arr.shape[1:])  # one gather (one decode per chunk)
         *_, c = frames.shape
         # (B, k, H, W, C) -> (B, H, W, k*C): one transposed copy of whole pixels (C bytes as one opaque
-        # item), ~2x faster than k strided copies of C-byte runs
+        # item), 1.6-2x faster than k strided copies of C-byte runs (measured on 64x64 RGB stacks)
         pixel = np.dtype((np.void, c * frames.dtype.itemsize))
         out = np.empty(frames.shape[:1] + frames.shape[2:-1] + (k,), pixel)
         out[...] = np.moveaxis(np.ascontiguousarray(frames).view(pixel)[..., 0], 1, -1)

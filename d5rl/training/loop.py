@@ -116,9 +116,10 @@ def train(
     settings = resolve(algo, task_id, overrides, offline_steps=offline_steps, online_steps=online_steps, tuned=tuned)
     cfg, agent_cls = settings.train, get_agent(settings.algo)[0]
     run_dir = Path(run_dir) if run_dir is not None else default_run_dir(settings.algo, task_id, seed)
-    ds = dataset if dataset is not None else load_task_dataset(
-        task_id, **({"episodes": cfg.dataset_episodes} if cfg.dataset_episodes else {}),
-        **({"memory_limit_bytes": int(cfg.dataset_in_memory_gb * 2**30)} if cfg.dataset_in_memory_gb is not None else {}))
+    data_kw = {"episodes": cfg.dataset_episodes} if cfg.dataset_episodes else {}
+    if cfg.dataset_in_memory_gb is not None:
+        data_kw["memory_limit_bytes"] = int(cfg.dataset_in_memory_gb * 2**30)
+    ds = dataset if dataset is not None else load_task_dataset(task_id, **data_kw)
     run_dir.mkdir(parents=True, exist_ok=True)
 
     agent_cfg = agent_cls.fit_config(settings.agent, ds)
