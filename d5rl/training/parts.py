@@ -4,6 +4,7 @@ as one object), the offline batch sampler (and its prefetcher), the metric accum
 from __future__ import annotations
 
 import collections
+import copy
 import dataclasses
 import math
 import time
@@ -93,8 +94,7 @@ class Prefetcher:
 
     def __init__(self, sampler: Sampler, n: int, rng: np.random.Generator, threads: int = 2, depth: int = 4):
         self.sampler, self.n, self.rng, self.depth = sampler, int(n), rng, int(depth)
-        self._ahead = np.random.default_rng()
-        self._ahead.bit_generator.state = rng.bit_generator.state
+        self._ahead = copy.deepcopy(rng)  # draws the batches' transitions, ahead of ``rng``
         self._pool = ThreadPoolExecutor(max(1, int(threads)), thread_name_prefix="d5rl-batches")
         self._pending: collections.deque = collections.deque()
 
