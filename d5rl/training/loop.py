@@ -202,16 +202,16 @@ def offline_phase(run: Run, agent, state: RunState):
     n_batch = agent.samples_per_update()
     if run.pixels and state.step < run.offline_steps:
         with Prefetcher(run.sampler, n_batch, state.rng) as batches:
-            return _offline_updates(run, agent, state, 1, batches.next)
+            return _offline_updates(run, agent, state, n_batch, 1, batches.next)
     k = max(1, int(run.cfg.updates_per_call))
-    return _offline_updates(run, agent, state, k, lambda: run.sampler.sample(n_batch, state.rng))
+    return _offline_updates(run, agent, state, n_batch, k, lambda: run.sampler.sample(n_batch, state.rng))
 
 
-def _offline_updates(run: Run, agent, state: RunState, k: int, next_batch):
-    """The offline loop: ``k`` updates per jit call (``update_many`` on stacked batches), else one per
-    ``next_batch()``."""
+def _offline_updates(run: Run, agent, state: RunState, n_batch: int, k: int, next_batch):
+    """The offline loop: ``k`` updates of ``n_batch`` samples per jit call (``update_many`` on stacked
+    batches), else one per ``next_batch()``."""
     cfg, metrics = run.cfg, Metrics(state, run.logger, run.cfg.log_interval, run.bar)
-    n_batch, total = agent.samples_per_update(), run.offline_steps + run.online_steps
+    total = run.offline_steps + run.online_steps
     while state.step < run.offline_steps:
         n = min(k - state.step % k, run.offline_steps - state.step)
         if n == 1:
