@@ -2,32 +2,13 @@
 
 import json
 
-import jax
 import numpy as np
 import pytest
 
 from d5rl.agents.config import ConfigError
 from d5rl.training.loop import NonFiniteLossError, load_run, train
 from d5rl.envs.toy.data import toy_dataset
-
-SMALL = {"hidden_dims": "32,32", "batch_size": "32", "eval_episodes": "2", "eval_envs": "2",
-         "log_interval": "16", "progress": "false", "tensorboard": "false"}
-
-
-def overrides(**kw):
-    return [f"{k}={v}" for k, v in {**SMALL, **kw}.items()]
-
-
-def leaves(agent):
-    return [np.asarray(x) for x in jax.tree_util.tree_leaves(agent)]
-
-
-def rows(run_dir):
-    out = []
-    for line in (run_dir / "metrics.jsonl").read_text().splitlines():
-        r = json.loads(line)
-        out.append({k: v for k, v in r.items() if not k.startswith("time/")})
-    return out
+from tests.training.helpers import leaves, overrides, rows
 
 
 def test_offline_run_writes_everything(tmp_path):
