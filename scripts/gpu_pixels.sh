@@ -1,12 +1,15 @@
 #!/bin/bash
 # Pixel Table 1 cells on a bare GPU machine with no network (the README's GPU runs, issue 21):
 #   BUDGET=560 bash scripts/gpu_pixels.sh
+#   CELLS="kitchen-randomized-mixed-v0:bc,iql:16:2:dataset_episodes=200" BUDGET=560 bash scripts/gpu_pixels.sh
+# CELLS lists TASK:ALGOS:GENERATE_WORKERS:BENCH_WORKERS[:SET,SET...]; each entry generates its data (one
+# entry at a time) and then runs its cells beside the others.
 # Call it again on the same (still warm) machine to go on: packages, data and cells live in .dwork/ of the
 # checkout (git-ignored), so a second call skips what is done and resumes unfinished cells from their
-# checkpoints.  LOCAL=1 skips the machine setup (a dry run here; KTASK/XTASK/STEPS make it small).
+# checkpoints.  LOCAL=1 skips the machine setup (a dry run here; CELLS and STEPS make it small).
 # The machine needs, in the checkout (git-ignored, prepared where pip works): .gl/ (libEGL/libGL .debs),
 # .whl/ (cp312 wheels of mujoco, mujoco-core, gymnasium, zstandard, xacro, flax, optax, ...), .assets/
-# (the extracted robot models, D5RL_ASSETS) and .dcache/{kitchen-standard,wx-sorting}.json (this
+# (the extracted robot models, D5RL_ASSETS) and .dcache/<dataset>.json (this
 # machine's manifests, to compare the regenerated data).  Cells come back in $OUT/cells.tgz, with
 # their final checkpoints (for the report's rollout GIFs, or to evaluate again where a lease ended mid-evaluation).
 T0=$(date +%s); BUDGET=${BUDGET:-540}; W=$PWD/.dwork
@@ -22,23 +25,27 @@ if [ -z "$LOCAL" ]; then
   nvidia-smi --query-gpu=name,memory.total,driver_version --format=csv,noheader; nproc; free -g | head -2
 fi
 python3 -c "import jax, flax, optax, mujoco, numpy; print('versions', jax.__version__, flax.__version__, optax.__version__, mujoco.__version__, numpy.__version__, jax.devices())" || exit 4
-K=${KTASK:-kitchen-standard-mixed-v0}; X=${XTASK:-wx-sorting-v0}
+CELLS=${CELLS:-"wx-sorting-v0:bc,iql:16:4 kitchen-standard-mixed-v0:iql:12:2"}
 # dataset_in_memory_gb: the frames are decoded into RAM once (wx-sorting: 12 GB a cell) instead of at every
 # batch; checkpoint_interval: a call cut short loses at most 1,000 steps a cell (both are execution-only)
 B="--seeds 0-1 --offline-steps ${STEPS:-5000} --no-report --no-progress --set dataset_in_memory_gb=16 --set checkpoint_interval=1000"
 cli() { local t=$1; shift; timeout $t python3 -m d5rl.cli "$@"; }
-gen() { local s=$(date +%s); cli $(( $(left) - 20 )) generate $1 --workers $2 2>&1 | tr '\r' '\n' | grep -v "it/s\|ep/s" | tail -2
-        stamp "generate+render $1: $(( $(date +%s) - s )) s"; }
-gen $X 16
-cli $(( $(left) - 25 )) bench --tasks $X --algos bc iql $B --workers 4 --out $W/cells/w > $W/bw.log 2>&1 &
-(gen $K 12; cli $(( $(left) - 25 )) bench --tasks $K --algos iql $B --workers 2 --out $W/cells/k > $W/bk.log 2>&1) &
+gen() { local s=$(date +%s); cli $(( $(left) - 20 )) generate "$@" 2>&1 | tr '\r' '\n' | grep -v "it/s\|ep/s" | tail -2
+        stamp "generate+render $*: $(( $(date +%s) - s )) s"; }
+entry() {  # TASK ALGOS GENERATE_WORKERS BENCH_WORKERS [SET,SET...]: its data (one entry at a time), then its cells
+  local sets="" prefix=""
+  for kv in ${5//,/ }; do sets="$sets --set $kv"; [[ $kv == dataset_episodes=* ]] && prefix="--episodes ${kv#*=}"; done
+  ( flock 9; gen $1 --workers $3 $prefix ) 9>$W/generate.lock  # cells on a prefix of the data need only that prefix
+  cli $(( $(left) - 25 )) bench --tasks $1 --algos ${2//,/ } $B $sets --workers $4 --out $W/cells/$1 > $W/bench-$1.log 2>&1
+}
+for e in $CELLS; do IFS=: read -r t a gw bw sets <<< "$e"; entry "$t" "$a" "$gw" "$bw" "$sets" & sleep 1; done
 progress() { for d in $W/cells/*/*/*/seed*; do [ -d $d ] || continue; printf ' %s:%s' "$(basename $(dirname $(dirname $(dirname $d))))-$(basename $(dirname $d))$(basename $d | tr -d seed)" \
              "$( [ -f $d/done ] && echo done || (tail -n1 $d/metrics.csv 2>/dev/null | cut -d, -f1))"; done; }
 while [ -n "$(jobs -r)" ]; do sleep 20; stamp "$(nvidia-smi --query-gpu=utilization.gpu,memory.used --format=csv,noheader 2>/dev/null) load $(cut -d' ' -f1 /proc/loadavg)$(progress)"; done
-tail -n 3 $W/bk.log $W/bw.log
-for d in kitchen-standard wx-sorting; do
-  m=$(ls $W/home/datasets/$d/*/manifest.json 2>/dev/null | head -1)
-  [ -n "$m" ] && [ -f .dcache/$d.json ] && python3 scripts/compare_manifests.py $m .dcache/$d.json
+tail -n 3 $W/bench-*.log
+for m in $W/home/datasets/*/*/manifest.json; do  # the regenerated data against this machine's, where carried
+  [ -f "$m" ] || continue; d=$(basename "$(dirname "$(dirname "$m")")")
+  [ -f ".dcache/$d.json" ] && python3 scripts/compare_manifests.py "$m" ".dcache/$d.json"
 done
 python3 - "$W/cells" <<'PY'
 import csv, glob, json, os, sys
