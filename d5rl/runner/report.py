@@ -37,7 +37,7 @@ import numpy as np
 from d5rl.errors import D5RLError
 from d5rl.runner import stats
 from d5rl.runner.execute import is_done, read_failures
-from d5rl.runner.grid import DONE_FILE, find_cells, stale_reason, trained_on
+from d5rl.runner.grid import DONE_FILE, LOG_FILE, find_cells, stale_reason, trained_on
 from d5rl.runner.logs import final_scores, read_evals
 
 # Paper order and display names; algorithms outside this list follow in alphabetical order.
@@ -100,7 +100,8 @@ class CellResult:
     videos: list[Path]
     stale: str | None = None  # why the result describes data the task no longer has (None: current)
     data: dict | None = None  # the dataset the job recorded (name, versions, seed, episodes)
-    wall_s: float | None = None  # the finished attempt's wall time
+    wall_s: float | None = None  # the run's wall time over all its sittings (see wall_is_last_sitting)
+    wall_is_last_sitting: bool = False  # resumed by code that did not yet count earlier sittings: a lower bound
     eval_episodes: int | None = None  # episodes of the final evaluation
 
     @property
@@ -129,11 +130,22 @@ def collect(run_dir: Path | str) -> list[CellResult]:
         done = is_done(cdir)
         marker = _read_json(cdir / DONE_FILE) if done else {}
         summary = marker.get("summary") or {}
+        wall, partial = summary.get("run_wall_s"), False
+        if wall is None and marker.get("wall_s") is not None:  # older runs: the last sitting's time only
+            wall, partial = marker["wall_s"], _sittings(cdir / LOG_FILE, cell.key) > 1
         out.append(CellResult(cell.task, cell.algo, cell.seed, cell.offline_steps, cell.online_steps, cdir,
                               done, rows, final, len(read_failures(cdir)), videos,
                               stale=stale_reason(cell, cdir) if done else None, data=trained_on(cdir),
-                              wall_s=marker.get("wall_s"), eval_episodes=summary.get("episodes")))
+                              wall_s=wall, wall_is_last_sitting=partial, eval_episodes=summary.get("episodes")))
     return out
+
+
+def _sittings(log: Path, key: str) -> int:
+    """How many processes worked on a cell: the attempt headers in its log."""
+    try:
+        return sum(line.startswith(f"=== {key} attempt ") for line in log.read_text(errors="replace").splitlines())
+    except OSError:
+        return 1
 
 
 def _read_json(path: Path) -> dict:
@@ -240,7 +252,9 @@ def protocol_markdown(results: list[CellResult]) -> str | None:
     lines = ["### Protocol and cost", "",
              "Per task and method, over the finished cells: gradient steps (then online environment steps), "
              "episodes of the final evaluation, the dataset the cells trained on, and the median wall time of a "
-             "cell (its host and the others running beside it vary; see each cell's `done`).", "",
+             "cell over all its sittings (its host and the others running beside it vary; see each cell's `done`; "
+             "'>=': some cells were resumed before runs counted their earlier sittings, so only the last is "
+             "known).", "",
              "| Task | Method | Cells | Steps | Final evaluation | Dataset | Wall time per cell |",
              "|---|---|---|---|---|---|---|"]
     for task, algo in keys:
@@ -251,6 +265,8 @@ def protocol_markdown(results: list[CellResult]) -> str | None:
         data = "; ".join(sorted({_data_label(c.data) for c in cells}))
         walls = [c.wall_s for c in cells if c.wall_s is not None]
         wall = _duration(float(np.median(walls))) if walls else "-"
+        if walls and any(c.wall_is_last_sitting for c in cells):
+            wall = ">= " + wall
         lines.append(f"| {task} | {method_name(algo)} | {len(cells)} | {steps} | "
                      f"{eps + ' episodes' if eps else '-'} | {data} | {wall} |")
     return "\n".join(lines) + "\n"

@@ -138,7 +138,8 @@ def train(
         agent = offline_phase(run, agent, state)
         agent = online_phase(run, agent, state)
         final = run.evaluate(agent, state.step, cfg.final_eval_episodes or cfg.eval_episodes)
-        summary = {"step": state.step, "run_dir": str(run_dir), **{k: v for k, v in final.items() if k != "returns"}}
+        summary = {"step": state.step, "run_dir": str(run_dir), **{k: v for k, v in final.items() if k != "returns"},
+                   "run_wall_s": round(state.elapsed(), 1), "resumed": resume is not None}
         (run_dir / "summary.json").write_text(json.dumps(summary, indent=2) + "\n")
         return {**summary, "agent": agent}
     finally:

@@ -40,18 +40,26 @@ class RunState:
     metric_sums: dict = dataclasses.field(default_factory=dict)  # metrics since the last log row, times updates
     metric_count: int = 0  # updates in metric_sums
     buffer: ReplayBuffer | None = None  # the online replay buffer
+    elapsed_before: float = 0.0  # wall seconds the run had spent in earlier sittings, up to their last checkpoint
+    started: float = dataclasses.field(default_factory=lambda: time.monotonic())  # this sitting's start (not saved)
+
+    def elapsed(self) -> float:
+        """Wall seconds of the run over all its sittings (work after a sitting's last checkpoint is lost and
+        not counted)."""
+        return self.elapsed_before + time.monotonic() - self.started
 
     def to_json(self) -> dict:
         return {"rng": self.rng.bit_generator.state, "step": self.step, "online_done": self.online_done,
                 "episode": self.episode, "online_started": self.online_started,
-                "metric_sums": dict(self.metric_sums), "metric_count": self.metric_count}
+                "metric_sums": dict(self.metric_sums), "metric_count": self.metric_count,
+                "elapsed_s": round(self.elapsed(), 3)}
 
     @classmethod
     def from_json(cls, d: dict, buffer: ReplayBuffer | None = None) -> "RunState":
         rng = np.random.default_rng()
         rng.bit_generator.state = d["rng"]
         return cls(rng, d["step"], d["online_done"], d["episode"], d["online_started"], dict(d["metric_sums"]),
-                   int(d["metric_count"]), buffer)
+                   int(d["metric_count"]), buffer, float(d.get("elapsed_s", 0.0)))  # older checkpoints: unknown, 0
 
 
 class Sampler:

@@ -137,3 +137,21 @@ def test_a_failed_prefetch_raises_in_the_training_thread():
     with Prefetcher(Broken(toy_dataset(2, pixels=True), 3, (), 0.9), 4, np.random.default_rng(0)) as batches:
         with pytest.raises(OSError, match="disk went away"):
             batches.next()
+
+
+def test_run_state_counts_wall_time_over_sittings(monkeypatch):
+    """A checkpoint carries the run's elapsed wall time; a resumed run goes on counting from it."""
+    from d5rl.training import parts
+
+    clock = [1000.0]
+    monkeypatch.setattr(parts.time, "monotonic", lambda: clock[0])
+    first = parts.RunState(np.random.default_rng(0))
+    clock[0] += 60.0
+    saved = json.loads(json.dumps(first.to_json()))
+    assert saved["elapsed_s"] == 60.0
+    clock[0] += 3600.0  # the machine was off: not the run's time
+    resumed = parts.RunState.from_json(saved)
+    clock[0] += 15.0
+    assert resumed.elapsed() == 75.0
+    del saved["elapsed_s"]  # a checkpoint written before runs counted sittings
+    assert parts.RunState.from_json(saved).elapsed() == 0.0

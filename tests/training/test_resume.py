@@ -15,10 +15,13 @@ def assert_offline_resume_is_exact(tmp_path, algo, task, steps, kw, ds, interrup
     full = train(algo, task, steps, 0, 1, kw, tmp_path / "a", dataset=ds)
     with pytest.raises(KeyboardInterrupt), interrupt_after_checkpoint(interrupt_at):
         train(algo, task, steps, 0, 1, kw, tmp_path / "b", dataset=ds)
+    first_sitting = json.loads((tmp_path / "b" / "checkpoint" / "state.json").read_text())["elapsed_s"]
     resumed = train(algo, task, steps, 0, 1, kw, tmp_path / "b", dataset=ds)
     for a, b in zip(leaves(full["agent"]), leaves(resumed["agent"])):
         np.testing.assert_array_equal(a, b)
     assert rows(tmp_path / "a") == rows(tmp_path / "b")
+    assert (full["resumed"], resumed["resumed"]) == (False, True)
+    assert first_sitting > 0 and resumed["run_wall_s"] >= first_sitting  # both sittings count
 
 
 def test_offline_resume_is_exact(tmp_path):
