@@ -121,6 +121,11 @@ def record_failure(cell_dir: Path, attempt: int, error: str, tb: str, wall_s: fl
     return rec
 
 
+def attempt_header(key: str) -> str:
+    """How the line starts that each process working on a cell writes to its log (one per sitting)."""
+    return f"=== {key} attempt "
+
+
 def execute_cell(cell_json: dict, cell_dir: str, attempt: int = 1, capture_output: bool = True) -> dict:
     """Run one cell; returns ``{"status": "ok"|"failed"|"skipped"|"busy", ...}``.  Never raises
     for a failing job (the failure is recorded in the cell directory)."""
@@ -144,7 +149,7 @@ def execute_cell(cell_json: dict, cell_dir: str, attempt: int = 1, capture_outpu
         redirect = _redirect_output(cdir / LOG_FILE) if capture_output else contextlib.nullcontext()
         try:
             with redirect:
-                print(f"=== {cell.key} attempt {attempt} on {socket.gethostname()} pid {os.getpid()} "
+                print(f"{attempt_header(cell.key)}{attempt} on {socket.gethostname()} pid {os.getpid()} "
                       f"at {time.strftime('%Y-%m-%d %H:%M:%S')}", flush=True)
                 job = resolve(cell.job)  # again, so an import error lands in the log with its traceback
                 summary = job(cell, cdir)

@@ -36,7 +36,7 @@ import numpy as np
 
 from d5rl.errors import D5RLError
 from d5rl.runner import stats
-from d5rl.runner.execute import is_done, read_failures
+from d5rl.runner.execute import attempt_header, is_done, read_failures
 from d5rl.runner.grid import DONE_FILE, LOG_FILE, find_cells, stale_reason, trained_on
 from d5rl.runner.logs import final_scores, read_evals
 
@@ -143,7 +143,7 @@ def collect(run_dir: Path | str) -> list[CellResult]:
 def _sittings(log: Path, key: str) -> int:
     """How many processes worked on a cell: the attempt headers in its log."""
     try:
-        return sum(line.startswith(f"=== {key} attempt ") for line in log.read_text(errors="replace").splitlines())
+        return sum(line.startswith(attempt_header(key)) for line in log.read_text(errors="replace").splitlines())
     except OSError:
         return 1
 
