@@ -52,17 +52,16 @@ def actions(theta: np.ndarray, steps: int = STEPS, dt: float = 0.05) -> np.ndarr
     return np.clip(out, -1.0, 1.0).astype(np.float32)
 
 
-def evaluate(env, theta: np.ndarray, seed: int) -> tuple[float, dict]:
+def evaluate(env, theta: np.ndarray, seed: int) -> tuple[float, bool]:
+    """(mean forward speed over the last SCORED steps, or -1 after a fall; whether it fell)."""
     env.reset(seed=seed)
-    speeds, rewards = [], []
+    speeds = []
     for a in actions(theta):
-        _, r, term, _, info = env.step(a)
+        _, _, term, _, info = env.step(a)
         speeds.append(info["forward_speed"])
-        rewards.append(r)
         if term:
-            return -1.0, {"fell": True, "steps": len(speeds)}
-    v = float(np.mean(speeds[-SCORED:]))
-    return v, {"fell": False, "reward_per_step": float(np.mean(rewards)), "speed_std": float(np.std(speeds[-SCORED:]))}
+            return -1.0, True
+    return float(np.mean(speeds[-SCORED:])), False
 
 
 def main(argv=None) -> None:
@@ -101,7 +100,7 @@ def main(argv=None) -> None:
     result = {
         "best_speed_m_s": best_v,
         "best_params": {k: round(float(v), 4) for k, v in zip([q[0] for q in PARAMS], best)},
-        "other_resets": {"speeds": [round(c[0], 3) for c in checks], "falls": sum(c[1].get("fell", False) for c in checks)},
+        "other_resets": {"speeds": [round(c[0], 3) for c in checks], "falls": sum(fell for _, fell in checks)},
         "per_iteration_best": history,
         "settings": vars(args),
         "wall_s": round(time.time() - t0, 1),
