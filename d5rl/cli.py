@@ -146,7 +146,7 @@ def cmd_render(args) -> int:
     try:
         frames = (replay_frames(env, states, args.size, args.quality) if states is not None
                   else rollout_frames(env, total - 1, args.seed, args.size, args.quality))
-        bar = progress_bar(frames, total=total, unit="frame", desc=desc, disable=args.quiet)
+        bar = progress_bar(frames, total=total, unit="frame", desc=desc)
         n = write_video(args.out, bar, fps=env.unwrapped.metadata.get("render_fps", 20))
     finally:
         env.close()
@@ -212,7 +212,6 @@ def build_parser() -> argparse.ArgumentParser:
     q.add_argument("--quality", choices=("fast", "full"), default="fast",
                    help="fast (default): no shadows, reflections or multisampling, several times faster on a CPU; "
                         "full: exactly as env.render()")
-    q.add_argument("--quiet", action="store_true", help="no progress bar")
     q.set_defaults(func=cmd_render)
 
     q = sub.add_parser("export-minari", help="export a dataset in the Minari format")
@@ -238,6 +237,8 @@ def build_parser() -> argparse.ArgumentParser:
                 continue  # the `train` extra is not installed
             raise
         getattr(mod, fn)(sub)
+    for q in sub.choices.values():  # one switch for every command's bars
+        q.add_argument("--no-progress", action="store_true", help="no progress bars (log files, CI)")
     return p
 
 
@@ -272,9 +273,12 @@ def main(argv: list[str] | None = None) -> int:
     (set D5RL_DEBUG=1 to see one)."""
     import os
 
+    from d5rl import progress
+
     parser = build_parser()
     args = parser.parse_args(argv)
     debug = os.environ.get("D5RL_DEBUG", "") not in ("", "0")
+    progress.set_enabled(not args.no_progress)
     try:
         try:
             return int(args.func(args) or 0)
@@ -290,6 +294,8 @@ def main(argv: list[str] | None = None) -> int:
     except KeyboardInterrupt:
         print("interrupted; run the same command again to resume where it stopped", file=sys.stderr)
         return 130
+    finally:
+        progress.set_enabled(True)
 
 
 if __name__ == "__main__":

@@ -10,10 +10,22 @@ import sys
 
 LOG_INTERVAL = 30.0  # seconds between updates when stderr is not a terminal
 
+_enabled = True
+
+
+def set_enabled(enabled: bool) -> None:
+    """Turn every bar of this process on or off (``d5rl COMMAND --no-progress`` turns them off)."""
+    global _enabled
+    _enabled = bool(enabled)
+
 
 def progress_bar(iterable=None, **kwargs):
-    """``tqdm(iterable, **kwargs)``, slowed to one update per :data:`LOG_INTERVAL` off a terminal."""
+    """``tqdm(iterable, **kwargs)``, slowed to one update per :data:`LOG_INTERVAL` off a terminal, hidden
+    after :func:`set_enabled` ``(False)``."""
     from tqdm.auto import tqdm
+
+    if not _enabled:
+        kwargs["disable"] = True
 
     if not _stderr_is_terminal():
         kwargs["mininterval"] = max(float(kwargs.get("mininterval", 0.1)), LOG_INTERVAL)

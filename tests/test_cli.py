@@ -76,10 +76,10 @@ def test_render_writes_the_whole_episode_by_default(tmp_path, capsys):
     import imageio.v3 as iio
 
     out = tmp_path / "toy.mp4"
-    assert main(["render", "toy-reach-v0", "--out", str(out), "--quiet"]) == 0
+    assert main(["render", "toy-reach-v0", "--out", str(out), "--no-progress"]) == 0
     assert "wrote 26 frames" in capsys.readouterr().out  # the first observation + all 25 steps
     assert len(list(iio.imiter(out))) == 26
-    assert main(["render", "toy-reach-v0", "--out", str(out), "--steps", "5", "--quiet"]) == 0
+    assert main(["render", "toy-reach-v0", "--out", str(out), "--steps", "5", "--no-progress"]) == 0
     assert "wrote 6 frames" in capsys.readouterr().out
     assert not list(tmp_path.glob(".*tmp*"))
 
@@ -91,7 +91,7 @@ def test_render_replays_every_stored_state_of_the_episode(tmp_path, capsys):
 
     assert main(["generate", toy.ENV_TASK, "--workers", "1"]) == 0
     out = tmp_path / "ep.mp4"
-    assert main(["render", toy.ENV_TASK, "--episode", "2", "--out", str(out), "--quiet"]) == 0
+    assert main(["render", toy.ENV_TASK, "--episode", "2", "--out", str(out), "--no-progress"]) == 0
     assert "wrote 9 frames" in capsys.readouterr().out  # episode 2: 8 transitions, 9 states
     assert len(list(iio.imiter(out))) == 9
 

@@ -182,7 +182,6 @@ def add_bench_parser(subparsers) -> argparse.ArgumentParser:
     q.add_argument("--no-prepare-data", action="store_true",
                    help="do not generate missing datasets before the cells start (each cell then loads its own)")
     q.add_argument("--dry-run", action="store_true", help="list the cells and their settings, run nothing")
-    q.add_argument("--no-progress", action="store_true")
     q.add_argument("--no-report", action="store_true", help="do not write RUN_DIR/report after the sweep")
     q.set_defaults(func=cmd_bench)
     return q
