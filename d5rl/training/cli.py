@@ -84,6 +84,8 @@ def cmd_eval(args) -> int:
     print(f"{task}: {res['episodes']} episodes, return {res['return']:.2f} ± {res['return_std']:.2f}, "
           f"length {res['length']:.1f}, success {res['success']:.2f}" + (f", video {res['video']}" if "video" in res
                                                                           else ""))
+    for k, v in res.get("stats", {}).items():
+        print(f"  {k}: {v:.2f}")
     if "score" in res:
         print(f"normalized score: {res['score']:.3f} ± {res['score_std']:.3f}")
     else:

@@ -31,7 +31,9 @@ def evaluate(
     video_path: str | Path | None = None,
     env_fn: Callable[[], gym.Env] | None = None,
 ) -> dict[str, Any]:
-    """Mean return, normalized score (if the task has references), success and length over episodes.
+    """Mean return, normalized score (if the task has references), success and length over episodes;
+    ``stats``: the mean over episodes of each value of the final ``info["episode_stats"]``, where the
+    task reports some (the kitchen: which subtasks were done).
 
     ``num_envs`` environments step in lockstep and the agent acts on all of them in
     one batch; ``processes=True`` puts each in its own process (gymnasium
@@ -83,8 +85,8 @@ def evaluate(
                         s = info.get("success")
                         succ[j] |= bool(s[j]) if s is not None else False
                         done[j] = term[j] or trunc[j]
-                        if done[j] and "score" in info:
-                            last[j] = {"score": float(info["score"][j])}
+                        if done[j]:
+                            last[j] = _unbatch_info(info, j)
                 else:
                     for a, j in zip(actions, live):
                         obs[j], r, term, trunc, info = envs[j].step(a)
@@ -114,6 +116,9 @@ def evaluate(
     out = {"return": float(np.mean(returns)), "return_std": float(np.std(returns)),
            "length": float(np.mean(lengths)), "success": float(np.mean(successes)),
            "episodes": len(returns), "returns": [float(x) for x in returns]}
+    stats = [info.get("episode_stats") or {} for info in final_infos]
+    if any(stats):
+        out["stats"] = {k: float(np.mean([st[k] for st in stats if k in st])) for k in sorted(set().union(*stats))}
     scorer = episode_scorer(task_id) if env_fn is None else None
     if scorer is not None:
         scores = np.asarray([scorer(r, info) for r, info in zip(returns, final_infos)], np.float64)
@@ -122,6 +127,16 @@ def evaluate(
     if render and frames:
         _write_video(Path(video_path), frames)
         out["video"] = str(video_path)
+    return out
+
+
+def _unbatch_info(info: dict, j: int) -> dict:
+    """Environment ``j``'s part of a vector env's info (``score`` and ``episode_stats``, which evaluation reads)."""
+    out: dict[str, Any] = {}
+    if "score" in info:
+        out["score"] = float(info["score"][j])
+    if "episode_stats" in info:
+        out["episode_stats"] = {k: float(v[j]) for k, v in info["episode_stats"].items() if not k.startswith("_")}
     return out
 
 

@@ -171,7 +171,8 @@ class Metrics:
 
 
 class Evaluator:
-    """Evaluates the agent on the task and logs ``eval/<task>/{return, return_std, length, success, score}``."""
+    """Evaluates the agent on the task and logs ``eval/<task>/{return, return_std, length, success, score}`` and
+    the task's episode statistics (``eval/<task>/subtask/microwave``, ...)."""
 
     def __init__(self, task_id: str, seed: int, frame_stack: int, cfg, logger: Logger, run_dir: Path):
         self.task_id, self.seed, self.frame_stack, self.cfg = task_id, seed, frame_stack, cfg
@@ -181,8 +182,8 @@ class Evaluator:
         video = self.run_dir / "videos" / f"step{step:09d}.mp4" if self.cfg.save_video else None
         res = evaluate(agent, self.task_id, episodes, seed=10_000 * (self.seed + 1), num_envs=self.cfg.eval_envs,
                        frame_stack=self.frame_stack, processes=self.cfg.eval_processes, video_path=video)
-        self.logger.log(step, {f"eval/{self.task_id}/{k}": res[k]
-                               for k in ("return", "return_std", "length", "success", "score") if k in res})
+        row = {k: res[k] for k in ("return", "return_std", "length", "success", "score") if k in res}
+        self.logger.log(step, {f"eval/{self.task_id}/{k}": v for k, v in {**row, **res.get("stats", {})}.items()})
         return res
 
 

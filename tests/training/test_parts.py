@@ -3,8 +3,11 @@
 import argparse
 import json
 
+import mujoco
 import numpy as np
 
+from d5rl.envs.kitchen.subtasks import SUBTASK_NAMES, SUBTASKS
+from d5rl.envs.kitchen.task import KitchenEnv
 from d5rl.training.logger import Logger
 from d5rl.training.replay import NO_RETURN, ReplayBuffer
 
@@ -92,6 +95,39 @@ def test_evaluation_scores_info_scored_tasks_from_the_last_info():
         total, done = total + r, term or trunc
     assert out["returns"] == [total]
     assert out["score"] == d5rl.episode_score("wx-sorting-v0", total, info) == info["score"]
+
+
+class _MicrowaveOpenOnSeed8(KitchenEnv):
+    """A 3-step kitchen episode; the one reset with seed 8 starts with the microwave open."""
+
+    def reset(self, *, seed=None, options=None):
+        obs, info = super().reset(seed=seed, options=options)
+        if seed == 8:
+            sub = SUBTASKS["microwave"]
+            self.data.qpos[sub.qpos_indices(self.model)] = sub.goal
+            mujoco.mj_forward(self.model, self.data)
+        return obs, info
+
+
+def _short_kitchen():
+    from gymnasium.wrappers import TimeLimit
+
+    return TimeLimit(_MicrowaveOpenOnSeed8(obs_mode="state"), 3)
+
+
+def test_evaluation_averages_the_tasks_episode_stats():
+    """The kitchen reports which subtasks an episode did; evaluation averages them, in one process or many."""
+    from d5rl.training.evaluation import evaluate
+
+    class Still:
+        def eval_actions(self, obs, seed=None):
+            return np.zeros((len(obs), 9), np.float32)
+
+    for processes in (False, True):
+        out = evaluate(Still(), "kitchen-standard-mixed-state-v0", 2, seed=7, num_envs=2, processes=processes,
+                       env_fn=_short_kitchen)
+        assert out["stats"]["subtask/microwave"] == 0.5, processes  # episodes reset with seeds 7 and 8
+        assert out["stats"]["subtask/kettle"] == 0.0 and len(out["stats"]) == len(SUBTASK_NAMES)
 
 
 def test_replay_buffer_next_actions_stay_within_episodes():

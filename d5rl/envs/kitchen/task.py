@@ -28,7 +28,10 @@ Reward
     distance to the goal < 0.3), so 0..4 per step.  ``info["completed"]`` holds a bool per
     subtask (all seven, order :data:`SUBTASK_NAMES`), ``info["solved"]`` the target subtasks
     solved at any step so far and ``info["score"]`` the normalized score: the fraction of the
-    four target subtasks solved so far (1.0 = all four).
+    four target subtasks solved so far (1.0 = all four).  ``info["episode_stats"]`` has
+    ``subtask/<name>`` (spaces as ``_``) for all seven subtasks: 1.0 once that subtask's object
+    has been in its goal configuration at any step of the episode, targets or not; evaluation
+    averages them over episodes (which subtasks an agent does, not only how many count).
 
 Start state
     The kitchen's rest pose (doors closed, knobs off, kettle on the bottom-left burner) with
@@ -96,6 +99,7 @@ class KitchenEnv(MujocoEnv):
         self._ctrl_lo = model.actuator_ctrlrange[:, 0].copy()
         self._ctrl_hi = model.actuator_ctrlrange[:, 1].copy()
         self._solved = np.zeros(len(self.tasks), dtype=bool)
+        self._reached = np.zeros(len(SUBTASK_NAMES), dtype=bool)
 
         self.action_space = spaces.Box(-1.0, 1.0, shape=(model.nu,), dtype=np.float32)
         proprio = spaces.Box(-np.inf, np.inf, shape=(km.NUM_ROBOT_QPOS,), dtype=np.float32)
@@ -132,7 +136,13 @@ class KitchenEnv(MujocoEnv):
             "solved": self._solved.copy(),
             "score": float(self._solved.mean()),
             "success": bool(self._solved.all()),
+            "episode_stats": {f"subtask/{n.replace(' ', '_')}": float(r) for n, r in zip(SUBTASK_NAMES, self._reached)},
         }
+
+    def _begin_episode(self, completed: np.ndarray) -> None:
+        """What counts as done from the first state on (nothing, from the kitchen's rest pose)."""
+        self._solved = completed[self._task_cols].copy()
+        self._reached = completed.copy()
 
     # --- gymnasium API ------------------------------------------------------------------------
     def reset(self, *, seed: int | None = None, options: dict | None = None):
@@ -144,7 +154,7 @@ class KitchenEnv(MujocoEnv):
         self.data.ctrl[:] = np.clip(qpos[: self.model.nu], self._ctrl_lo, self._ctrl_hi)
         mujoco.mj_forward(self.model, self.data)
         completed = self.completed()
-        self._solved = completed[self._task_cols].copy()
+        self._begin_episode(completed)
         return self._get_obs(), self._info(completed)
 
     def action_to_ctrl(self, action: np.ndarray) -> np.ndarray:
@@ -159,5 +169,6 @@ class KitchenEnv(MujocoEnv):
         completed = self.completed()
         in_goal = completed[self._task_cols]
         self._solved |= in_goal
+        self._reached |= completed
         reward = float(in_goal.sum())
         return self._get_obs(), reward, False, False, self._info(completed)

@@ -133,6 +133,26 @@ def test_reward_counts_target_objects_in_goal():
     assert r2 <= 4
 
 
+def test_episode_stats_record_every_subtask_ever_done():
+    """info["episode_stats"]: each of the seven subtasks, 1.0 once its object was at its goal in this episode,
+    whether the task counts it or not, and still 1.0 after the object leaves the goal."""
+    env = KitchenEnv(obs_mode="state", tasks=MIXED)
+    _, info = env.reset(seed=0)
+    assert info["episode_stats"] == {f"subtask/{n.replace(' ', '_')}": 0.0 for n in SUBTASK_NAMES}
+    start = env.data.qpos.copy()
+    _set_goal(env, "top burner")  # not a target of the mixed task
+    _, r, _, _, info = env.step(np.zeros(9, np.float32))
+    assert r == 0 and info["score"] == 0 and info["episode_stats"]["subtask/top_burner"] == 1.0
+    env.data.qpos[:] = start  # back to the rest pose: no subtask is in its goal configuration now
+    mujoco.mj_forward(env.model, env.data)
+    _, _, _, _, info = env.step(np.zeros(9, np.float32))
+    assert not info["completed"].any()
+    assert info["episode_stats"]["subtask/top_burner"] == 1.0 and sum(info["episode_stats"].values()) == 1.0
+    _, info = env.reset(seed=1)
+    assert sum(info["episode_stats"].values()) == 0.0
+    env.close()
+
+
 def test_zero_action_holds_the_arm_still(state_env):
     state_env.reset(seed=1)
     q0 = state_env.data.qpos[:7].copy()

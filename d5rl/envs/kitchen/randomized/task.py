@@ -109,7 +109,7 @@ class RandomizedKitchenEnv(KitchenEnv):
         mujoco.mju_mulQuat(self.data.qpos[adr + 3 : adr + 7], turn, self.data.qpos[adr + 3 : adr + 7].copy())
         mujoco.mj_forward(self.model, self.data)
         completed = self.completed()
-        self._solved = completed[self._task_cols].copy()
+        self._begin_episode(completed)
         obs, info = self._get_obs(), self._info(completed)
         info["domain"] = domain.to_json()
         return obs, info
