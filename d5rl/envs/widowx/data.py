@@ -45,10 +45,9 @@ from d5rl.envs.widowx import scene as wscene
 from d5rl.envs.widowx import domain as wdom
 from d5rl.envs.widowx import scripted
 from d5rl.envs.widowx.registration import MAX_EPISODE_STEPS
-from d5rl.envs.widowx.task import WidowXSortingEnv
+from d5rl.envs.widowx.task import LIFTED_Z, WidowXSortingEnv
 
 PICKPLACE_STEPS = 60
-LIFTED_Z = 0.06  # m: an object whose centre rises this high while carried counts as grasped
 
 
 class WidowXScriptedGenerator:

@@ -30,7 +30,10 @@ Observation space
 Reward
     The number of objects lying in their correct bin (0, 1 or 2) at each step.
     The normalized score of an episode is the fraction sorted at its end
-    (final reward / 2), reported as ``info["score"]``.
+    (final reward / 2), reported as ``info["score"]``.  ``info["episode_stats"]`` says, per
+    object (``shoe/...``, ``toy/...``), whether it has ``lifted`` (its centre rose above
+    :data:`LIFTED_Z` at some step of the episode) and whether it lies ``in_its_bin`` or
+    ``in_other_bin`` now; evaluation averages the final values over episodes.
 
 Start state
     The arm at a home pose above the table (±1.5 cm noise), gripper open; the
@@ -74,6 +77,7 @@ SETTLE_MAX_STEPS = 1500  # at most 3 s: objects are at rest well before (checked
 REST_SPEED = 0.005  # m/s (and rad/s x 0.1 m): an object slower than this is at rest
 DROP_HEIGHT = 0.01  # m between the table and the dropped object's lowest point
 MIN_OBJECT_DISTANCE = 0.09
+LIFTED_Z = 0.06  # m: an object whose centre rises this high has left the table (grasped, or thrown)
 
 
 def sorted_count(model: mujoco.MjModel, data: mujoco.MjData, domain: wdom.Domain) -> tuple[int, dict[str, str | None]]:
@@ -154,6 +158,8 @@ class WidowXSortingEnv(MujocoEnv):
         return self._step_result()
 
     def _step_result(self):
+        for name in self.domain.objects:
+            self._lifted[name] |= bool(wscene.object_center(self.model, self.data, name)[2] > LIFTED_Z)
         count, where = sorted_count(self.model, self.data, self.domain)
         info = self._info(count, where)
         return self._obs(), float(count), False, False, info
@@ -166,6 +172,9 @@ class WidowXSortingEnv(MujocoEnv):
             "is_success": count == 2,
             "shoe_bin": where[self.domain.shoe],
             "toy_bin": where[self.domain.toy],
+            "episode_stats": {f"{wm.CATEGORY[n]}/{k}": float(v) for n in self.domain.objects for k, v in (
+                ("lifted", self._lifted[n]), ("in_its_bin", where[n] == wm.CATEGORY[n]),
+                ("in_other_bin", where[n] not in (None, wm.CATEGORY[n])))},
         }
 
     # --- reset -------------------------------------------------------------------
@@ -203,6 +212,7 @@ class WidowXSortingEnv(MujocoEnv):
         self.data.qpos[self.index.finger_qpos] = [wm.FINGER_OPEN, -wm.FINGER_OPEN]
         self._set_targets(home, -1.0)
         self._settle()
+        self._lifted = dict.fromkeys(domain.objects, False)
         count, where = sorted_count(self.model, self.data, self.domain)
         return self._obs(), self._info(count, where)
 

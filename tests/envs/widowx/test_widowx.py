@@ -166,6 +166,9 @@ def test_object_dropped_in_bin_counts(env, bin_name):
     assert wscene.in_bin(pos, bin_name) and pos[2] < wm.BIN_HEIGHT  # it stays inside
     assert info["shoe_bin"] == bin_name and info["toy_bin"] is None
     assert r == (1.0 if bin_name == "shoe" else 0.0)
+    stats = info["episode_stats"]  # dropped from 12 cm: it was off the table
+    assert stats["shoe/lifted"] == 1.0 and stats["toy/lifted"] == 0.0
+    assert (stats["shoe/in_its_bin"], stats["shoe/in_other_bin"]) == ((1.0, 0.0) if bin_name == "shoe" else (0.0, 1.0))
     # both sorted -> 2
     tx, ty = wm.BIN_CENTERS["toy"]
     env.index.set_object_pose(env.data, "duck", [tx - 0.035, ty, 0.12], wscene.yaw_quat(math.pi / 2))
@@ -183,6 +186,11 @@ def test_object_on_table_does_not_count(env):
     for _ in range(5):
         _, r, _, _, info = env.step(np.zeros(5, np.float32))
     assert r == 0.0 and info["shoe_bin"] is None
+    assert not any(info["episode_stats"].values())  # on the table, never higher than 3 cm
+    _, info = env.reset(seed=1, options={"domain": _domain()})
+    assert set(info["episode_stats"]) == {f"{o}/{k}" for o in ("shoe", "toy")
+                                          for k in ("lifted", "in_its_bin", "in_other_bin")}
+    assert not any(info["episode_stats"].values())
 
 
 # --- scripted policy ---------------------------------------------------------------------
