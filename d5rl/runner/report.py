@@ -103,6 +103,7 @@ class CellResult:
     wall_s: float | None = None  # the run's wall time over all its sittings (see wall_is_last_sitting)
     wall_is_last_sitting: bool = False  # resumed by code that did not yet count earlier sittings: a lower bound
     eval_episodes: int | None = None  # episodes of the final evaluation
+    stats: dict[str, float] | None = None  # the final evaluation's episode statistics (what the agent did)
 
     @property
     def counts(self) -> bool:
@@ -136,7 +137,8 @@ def collect(run_dir: Path | str) -> list[CellResult]:
         out.append(CellResult(cell.task, cell.algo, cell.seed, cell.offline_steps, cell.online_steps, cdir,
                               done, rows, final, len(read_failures(cdir)), videos,
                               stale=stale_reason(cell, cdir) if done else None, data=trained_on(cdir),
-                              wall_s=wall, wall_is_last_sitting=partial, eval_episodes=summary.get("episodes")))
+                              wall_s=wall, wall_is_last_sitting=partial, eval_episodes=summary.get("episodes"),
+                              stats=summary.get("stats")))
     return out
 
 
@@ -270,6 +272,36 @@ def protocol_markdown(results: list[CellResult]) -> str | None:
         lines.append(f"| {task} | {method_name(algo)} | {len(cells)} | {steps} | "
                      f"{eps + ' episodes' if eps else '-'} | {data} | {wall} |")
     return "\n".join(lines) + "\n"
+
+
+def behaviour_markdown(results: list[CellResult]) -> str | None:
+    """What the agents did in their final evaluation, from the statistics their task reports per episode (the
+    kitchen: which subtasks were done; WidowX: each object lifted, in its bin, in the other): per task and method,
+    the mean over the finished cells that recorded them."""
+    groups: dict[str, dict[str, list[dict]]] = {}
+    for r in results:
+        if r.counts and r.stats:
+            groups.setdefault(r.task, {}).setdefault(r.algo, []).append(r.stats)
+    if not groups:
+        return None
+    lines = ["### What the agents do", "",
+             "Per task, the fraction of final-evaluation episodes in which each thing happened (kitchen: the "
+             "subtask's object reached its goal configuration, counted by the task or not; WidowX: the object "
+             "was lifted off the table, ends in its bin, ends in the other bin), mean over the cells that "
+             "recorded it (cells from before 2026-11-26 did not).", ""]
+    for task in sorted(groups, key=lambda t: (_env_order(environment(t)), environment(t), t)):
+        by_algo = groups[task]
+        keys = sorted(set().union(*(st for cells in by_algo.values() for st in cells)))
+        head = [k.removeprefix("subtask/").replace("_", " ") for k in keys]
+        lines += [f"**{task}**", "", "| Method | Cells | " + " | ".join(head) + " |",
+                  "|---|---|" + "---|" * len(keys)]
+        for algo in _method_order(by_algo):
+            cells = by_algo[algo]
+            vals = [[st[k] for st in cells if k in st] for k in keys]
+            lines.append(f"| {method_name(algo)} | {len(cells)} | "
+                         + " | ".join(_fmt(float(np.mean(v)), 2) if v else "-" for v in vals) + " |")
+        lines.append("")
+    return "\n".join(lines)
 
 
 def table_csv(table: dict) -> str:
@@ -432,6 +464,10 @@ def write_report(run_dir: Path | str, out_dir: Path | str | None = None, reps: i
     if protocol:
         (out / "protocol.md").write_text(protocol)
         parts.append(protocol)
+    behaviour = behaviour_markdown(results)
+    if behaviour:
+        (out / "behaviour.md").write_text(behaviour)
+        parts.append(behaviour)
 
     if plots:
         pngs = plot_curves(results, out / "curves")
