@@ -73,6 +73,8 @@ def main(argv=None) -> None:
     score = f"score {r['score']:.3f} ± {r['score_std']:.3f}, " if "score" in r else ""
     print(f"{args.task}: {args.k}-nearest-neighbour policy over {r['episodes']} episodes: {score}"
           f"return {r['return']:.1f} ± {r['return_std']:.1f}")
+    for k, v in r.get("stats", {}).items():
+        print(f"  {k}: {v:.2f}")
 
 
 if __name__ == "__main__":
