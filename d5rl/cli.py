@@ -46,6 +46,8 @@ def cmd_info(args) -> int:
     print(f"  score:        {s.score_definition}")
     if s.score is not None:
         print(f"                random = {s.score.random:.3f}, expert = {s.score.expert:.3f}  ({s.score.source})")
+        if s.score.expert_note:
+            print(f"                the expert: {s.score.expert_note}")
     else:
         print("                reference returns not computed yet")
     if s.dataset is None:

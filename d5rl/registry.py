@@ -74,6 +74,7 @@ class ScoreRef:
     random: float
     expert: float
     source: str  # how the numbers were measured (command, episodes, seed)
+    expert_note: str = ""  # what the expert does on the task (e.g. its speed), shown by `d5rl info`
 
 
 @dataclasses.dataclass(frozen=True)

@@ -5,7 +5,8 @@
 ``random`` is the mean return of uniform random actions; ``expert`` is the mean
 return of the best data-collecting agent's final policy (deterministic actions)
 on the task itself.  A normalized score of 1 therefore means "as good as the best
-policy that produced the data", 0 "as good as random actions".
+policy that produced the data", 0 "as good as random actions".  Each agent's mean forward
+speed over its episodes is recorded with its return (``d5rl info`` shows the expert's).
 """
 
 from __future__ import annotations
@@ -17,15 +18,17 @@ import numpy as np
 
 from d5rl.envs.a1.agents import POLICY_DIR
 from d5rl.envs.a1.policy import SnapshotPolicy
+from d5rl.envs.a1.registration import SCORES_FILE
 from d5rl.registry import get_spec, make_env
 
-SCORES_FILE = Path(__file__).with_name("scores.json")
 CANDIDATES = {"a1-walk-v0": ("speed-0.5", "speed-0.8", "speed-1.0"),
               "a1-run-v0": ("speed-0.5", "speed-0.8", "speed-1.0"),
               "a1-hiking-v0": ("heading",)}
 
 
-def evaluate(task_id: str, policy: SnapshotPolicy, episodes: int, seed: int, deterministic: bool = True) -> np.ndarray:
+def evaluate(task_id: str, policy: SnapshotPolicy, episodes: int, seed: int, deterministic: bool = True,
+             speeds: list | None = None) -> np.ndarray:
+    """Returns of ``episodes`` episodes; each episode's mean forward speed is appended to ``speeds``."""
     env = make_env(task_id)
     rng = np.random.default_rng(seed)
     returns = []
@@ -33,10 +36,12 @@ def evaluate(task_id: str, policy: SnapshotPolicy, episodes: int, seed: int, det
         obs, _ = env.reset(seed=seed * 100_003 + i)
         total, done = 0.0, False
         while not done:
-            obs, r, term, trunc, _ = env.step(policy(obs, rng, deterministic=deterministic))
+            obs, r, term, trunc, info = env.step(policy(obs, rng, deterministic=deterministic))
             total += r
             done = term or trunc
         returns.append(total)
+        if speeds is not None:
+            speeds.append(info["episode_stats"]["forward_speed"])
     env.close()
     return np.asarray(returns)
 
@@ -45,17 +50,21 @@ def calibrate(task_id: str, episodes: int = 20, seed: int = 0) -> dict:
     get_spec(task_id)
     random_returns = evaluate(task_id, SnapshotPolicy(None), episodes, seed, deterministic=False)
     best_agent, best = None, -np.inf
-    per_agent = {}
+    per_agent, per_agent_speed = {}, {}
     for agent in CANDIDATES[task_id]:
-        ret = evaluate(task_id, SnapshotPolicy(POLICY_DIR / agent / "final.npz"), episodes, seed)
+        speeds: list[float] = []
+        ret = evaluate(task_id, SnapshotPolicy(POLICY_DIR / agent / "final.npz"), episodes, seed, speeds=speeds)
         per_agent[agent] = round(float(ret.mean()), 3)
+        per_agent_speed[agent] = round(float(np.mean(speeds)), 3)
         if ret.mean() > best:
             best_agent, best = agent, float(ret.mean())
     return {
         "random": round(float(random_returns.mean()), 3),
         "expert": round(best, 3),
         "expert_agent": best_agent,
+        "expert_speed": per_agent_speed[best_agent],  # m/s, mean forward speed of its episodes
         "per_agent": per_agent,
+        "per_agent_speed": per_agent_speed,
         "source": f"d5rl calibrate {task_id} --episodes {episodes} --seed {seed}: mean return of uniform random "
                   f"actions / of agent '{best_agent}' (final policy, deterministic)",
     }

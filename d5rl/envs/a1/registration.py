@@ -18,7 +18,11 @@ def _scores() -> dict:
 
 def _ref(task_id: str, scores: dict) -> ScoreRef | None:
     s = scores.get(task_id)
-    return None if s is None else ScoreRef(s["random"], s["expert"], s["source"])
+    if s is None:
+        return None
+    note = (f"'{s['expert_agent']}' runs {s['expert_speed']:.2f} m/s on average on this task"
+            if "expert_speed" in s else "")
+    return ScoreRef(s["random"], s["expert"], s["source"], expert_note=note)
 
 
 SPEED_AGENTS = ("speed-0.5", "speed-0.8", "speed-1.0")

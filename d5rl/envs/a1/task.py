@@ -47,7 +47,10 @@ class A1Env(MujocoEnv):
     standing − c · Σ|q̇ · τ|`` with ``standing`` = upright tolerance × mean joint tolerance
     around the nominal pose and c = 0.01 (hiking: the speed term is multiplied by
     ``tolerance(heading error, ±π/12, margin π)`` and c = 0.001).  Per-step terms are in
-    ``info`` (``forward_speed``, ``standing``, ``energy``, ``heading_error``).
+    ``info`` (``forward_speed``, ``standing``, ``energy``, ``heading_error``);
+    ``info["episode_stats"]`` has the episode's mean ``forward_speed`` so far (m/s), whether it
+    ``ended_early`` (a fall, or straying off the course), and on the course the
+    ``waypoints_reached``; evaluation averages the final values over episodes.
 
     **Start state.** The ``home`` keyframe with joint noise U(±0.05 rad) and yaw noise
     U(±0.1 rad) (hiking: at x = -20 facing the course).
@@ -150,6 +153,7 @@ class A1Env(MujocoEnv):
         self._heading = rng.uniform(-np.pi, np.pi) if self.command == "heading" else 0.0
         self._waypoint = 0
         self._t = 0
+        self._speed_sum = 0.0
         mujoco.mj_forward(self.model, self.data)
         return self._obs(), {}
 
@@ -184,5 +188,9 @@ class A1Env(MujocoEnv):
         terminated = bool(abs(roll) > MAX_TILT or abs(pitch) > MAX_TILT)
         if self.course is not None and abs(self.data.qpos[1]) > MAX_LATERAL_OFFSET:
             terminated = True
-        info = {**terms, "x": float(self.data.qpos[0]), "waypoints_reached": self._waypoint}
+        self._speed_sum += terms["forward_speed"]
+        stats = {"forward_speed": self._speed_sum / self._t, "ended_early": float(terminated)}
+        if self.command == "waypoints":
+            stats["waypoints_reached"] = float(self._waypoint)
+        info = {**terms, "x": float(self.data.qpos[0]), "waypoints_reached": self._waypoint, "episode_stats": stats}
         return self._obs(), float(reward), terminated, False, info

@@ -92,3 +92,36 @@ def test_expert_beats_random_on_walk():
     best = max(evaluate("a1-walk-v0", SnapshotPolicy(POLICY_DIR / a / "final.npz"), 3, 0).mean()
                for a in ("speed-0.5", "speed-0.8", "speed-1.0"))
     assert best > 2 * rnd
+
+
+def test_calibration_records_the_experts_speed(monkeypatch, capsys):
+    """calibrate stores each agent's mean forward speed next to its return; `d5rl info` says how fast the expert is."""
+    from d5rl.cli import main
+    from d5rl.envs.a1 import calibrate as cal
+    from d5rl.envs.a1.registration import _ref
+
+    speeds: list = []
+    ret = evaluate("a1-walk-v0", SnapshotPolicy(POLICY_DIR / "speed-0.8" / "final.npz"), 1, 0, speeds=speeds)
+    assert len(ret) == len(speeds) == 1 and 0.3 < speeds[0] < 1.2  # the 0.8 m/s agent walks
+    monkeypatch.setattr(cal, "CANDIDATES", {"a1-walk-v0": ("speed-0.5", "speed-0.8")})
+
+    class Named:  # stands for a snapshot: which agent it is
+        def __init__(self, path):
+            self.name = path.parent.name if path else "random"
+
+    returns, agent_speeds = {"random": 100.0, "speed-0.5": 200.0, "speed-0.8": 300.0}, {"speed-0.5": 0.5, "speed-0.8": 0.7}
+
+    def fake_evaluate(task, policy, episodes, seed, deterministic=True, speeds=None):
+        if speeds is not None:
+            speeds.extend([agent_speeds[policy.name]] * episodes)
+        return np.full(episodes, returns[policy.name])
+
+    monkeypatch.setattr(cal, "SnapshotPolicy", Named)
+    monkeypatch.setattr(cal, "evaluate", fake_evaluate)
+    result = cal.calibrate("a1-walk-v0", episodes=2)
+    assert result["expert_agent"] == "speed-0.8" and result["expert_speed"] == 0.7
+    assert result["per_agent_speed"] == {"speed-0.5": 0.5, "speed-0.8": 0.7}
+    ref = _ref("a1-walk-v0", {"a1-walk-v0": result})
+    assert ref.expert == 300.0 and ref.expert_note == "'speed-0.8' runs 0.70 m/s on average on this task"
+    assert main(["info", "a1-walk-v0"]) == 0
+    assert "the expert: 'speed-0.8' runs" in capsys.readouterr().out  # the committed scores.json has speeds

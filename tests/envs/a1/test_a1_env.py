@@ -90,8 +90,29 @@ def test_tipping_over_terminates():
     base.data.qpos[3:7] = [np.cos(np.pi / 4), np.sin(np.pi / 4), 0, 0]  # rolled 90 degrees
     base.data.qpos[2] = 0.4
     mujoco.mj_forward(base.model, base.data)
-    _, _, term, _, _ = env.step(np.zeros(12, np.float32))
-    assert term
+    _, _, term, _, info = env.step(np.zeros(12, np.float32))
+    assert term and info["episode_stats"]["ended_early"] == 1.0
+
+
+def test_episode_stats_mean_forward_speed_and_waypoints():
+    """info["episode_stats"]: the mean of the steps' forward speeds so far, and on the course the waypoints passed."""
+    env = d5rl.make_env("a1-walk-v0")
+    env.reset(seed=0)
+    rng = np.random.default_rng(0)
+    speeds = []
+    for _ in range(30):
+        _, _, term, _, info = env.step(rng.uniform(-1, 1, 12).astype(np.float32))
+        speeds.append(info["forward_speed"])
+    assert info["episode_stats"]["forward_speed"] == pytest.approx(np.mean(speeds), abs=1e-12)
+    assert info["episode_stats"]["ended_early"] == float(term) and "waypoints_reached" not in info["episode_stats"]
+    env.reset(seed=1)
+    _, _, _, _, info = env.step(np.zeros(12, np.float32))
+    assert info["episode_stats"]["forward_speed"] == pytest.approx(info["forward_speed"], abs=1e-12)  # reset clears it
+    hike = d5rl.make_env("a1-hiking-v0")
+    hike.reset(seed=0)
+    hike.unwrapped.data.qpos[0] = 0.5  # past the waypoints at x = -10 and 0
+    _, _, _, _, info = hike.step(np.zeros(12, np.float32))
+    assert info["episode_stats"]["waypoints_reached"] == 2.0
 
 
 def test_hiking_course_is_rough_and_deterministic():
