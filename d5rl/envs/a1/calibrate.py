@@ -18,12 +18,10 @@ import numpy as np
 
 from d5rl.envs.a1.agents import POLICY_DIR
 from d5rl.envs.a1.policy import SnapshotPolicy
-from d5rl.envs.a1.registration import SCORES_FILE
+from d5rl.envs.a1.registration import HIKING_AGENTS, SCORES_FILE, SPEED_AGENTS
 from d5rl.registry import get_spec, make_env
 
-CANDIDATES = {"a1-walk-v0": ("speed-0.5", "speed-0.8", "speed-1.0"),
-              "a1-run-v0": ("speed-0.5", "speed-0.8", "speed-1.0"),
-              "a1-hiking-v0": ("heading",)}
+CANDIDATES = {"a1-walk-v0": SPEED_AGENTS, "a1-run-v0": SPEED_AGENTS, "a1-hiking-v0": HIKING_AGENTS}  # shipped agents
 
 
 def evaluate(task_id: str, policy: SnapshotPolicy, episodes: int, seed: int, deterministic: bool = True,
