@@ -138,7 +138,7 @@ def collect(run_dir: Path | str) -> list[CellResult]:
                               done, rows, final, len(read_failures(cdir)), videos,
                               stale=stale_reason(cell, cdir) if done else None, data=trained_on(cdir),
                               wall_s=wall, wall_is_last_sitting=partial, eval_episodes=summary.get("episodes"),
-                              stats=summary.get("stats")))
+                              stats=_read_json(cdir / "summary.json").get("stats") if done else None))
     return out
 
 
@@ -285,10 +285,12 @@ def behaviour_markdown(results: list[CellResult]) -> str | None:
     if not groups:
         return None
     lines = ["### What the agents do", "",
-             "Per task, the fraction of final-evaluation episodes in which each thing happened (kitchen: the "
-             "subtask's object reached its goal configuration, counted by the task or not; WidowX: the object "
-             "was lifted off the table, ends in its bin, ends in the other bin), mean over the cells that "
-             "recorded it (cells from before 2026-11-26 did not).", ""]
+             "Per task, what the final evaluation's episodes did, from the statistics the task reports per "
+             "episode, averaged over episodes and then over the cells that recorded them (cells from before "
+             "2026-11-26 did not). Kitchen: the fraction of episodes in which each subtask's object reached its "
+             "goal configuration, counted by the task or not; WidowX: the object was lifted off the table, ends "
+             "in its bin, ends in the other bin; A1: mean forward speed (m/s), episodes that ended early (a "
+             "fall, or off the course), waypoints reached.", ""]
     for task in sorted(groups, key=lambda t: (_env_order(environment(t)), environment(t), t)):
         by_algo = groups[task]
         keys = sorted(set().union(*(st for cells in by_algo.values() for st in cells)))

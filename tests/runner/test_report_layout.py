@@ -97,8 +97,8 @@ def test_wall_time_counts_every_sitting(tmp_path):
 
 
 def test_what_the_agents_do_from_their_episode_stats(tmp_path):
-    """The final evaluation's episode statistics (kitchen: which subtasks) are averaged per task and method;
-    cells without them are left out of that table, not counted as zeros."""
+    """The final evaluation's episode statistics (kitchen: which subtasks; the run's summary.json) are averaged
+    per task and method; cells without them are left out of that table, not counted as zeros."""
     for algo, seed, stats in [("bc", 0, {"subtask/microwave": 1.0, "subtask/slide_cabinet": 0.2}),
                               ("bc", 1, {"subtask/microwave": 0.5, "subtask/slide_cabinet": 0.0}),
                               ("bc", 2, None), ("iql", 0, {"subtask/microwave": 0.0})]:
@@ -106,7 +106,8 @@ def test_what_the_agents_do_from_their_episode_stats(tmp_path):
         cdir = cell.directory(tmp_path)
         write_cell_file(cell, cdir)
         (cdir / "metrics.jsonl").write_text(json.dumps({"step": 100, f"eval/{cell.task}/score": 0.5}) + "\n")
-        (cdir / "done").write_text(json.dumps({"summary": {"episodes": 4, **({"stats": stats} if stats else {})}}))
+        (cdir / "done").write_text(json.dumps({"summary": {"episodes": 4}}))  # the job's summary keeps scalars only
+        (cdir / "summary.json").write_text(json.dumps({"score": 0.5, **({"stats": stats} if stats else {})}))
     report = write_report(tmp_path, plots=False).read_text()
     assert "| Method | Cells | microwave | slide cabinet |" in report
     assert "| BC | 2 | 0.75 | 0.10 |" in report
