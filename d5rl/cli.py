@@ -270,6 +270,16 @@ def _os_error(e: OSError) -> D5RLError:
                      "D5RL_DEBUG=1 shows the traceback")
 
 
+def _silence_stdout() -> None:
+    """Point stdout at /dev/null so that the interpreter's final flush does not fail again."""
+    import os
+
+    try:
+        os.dup2(os.open(os.devnull, os.O_WRONLY), sys.stdout.fileno())
+    except (AttributeError, OSError, ValueError):  # not a real file (tests) or already closed
+        pass
+
+
 def main(argv: list[str] | None = None) -> int:
     """Run one command; a problem the user can fix is one line on stderr (exit 2), never a traceback
     (set D5RL_DEBUG=1 to see one)."""
@@ -285,7 +295,7 @@ def main(argv: list[str] | None = None) -> int:
         try:
             return int(args.func(args) or 0)
         except OSError as e:
-            if debug or isinstance(e, D5RLError):
+            if debug or isinstance(e, (D5RLError, BrokenPipeError)):
                 raise
             raise _os_error(e) from e
     except D5RLError as e:
@@ -296,6 +306,9 @@ def main(argv: list[str] | None = None) -> int:
     except KeyboardInterrupt:
         print("interrupted; run the same command again to resume where it stopped", file=sys.stderr)
         return 130
+    except BrokenPipeError:  # the reader left (`d5rl list | head`): stop quietly, as other tools do
+        _silence_stdout()
+        return 141
     finally:
         progress.set_enabled(True)
 

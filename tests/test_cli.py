@@ -108,3 +108,19 @@ def test_render_and_browse_bad_input_is_one_line(capsys, tmp_path):
         assert code == 2
         err = capsys.readouterr().err
         assert says in err and "Traceback" not in err
+
+
+def test_a_closed_pipe_ends_quietly(monkeypatch, capsys):
+    """`d5rl list | head -1`: the reader leaving is not a disk problem to report."""
+    import sys
+
+    class Closed:
+        def write(self, text):
+            raise BrokenPipeError(32, "Broken pipe")
+
+        def flush(self):
+            pass
+
+    monkeypatch.setattr(sys, "stdout", Closed())
+    assert main(["list"]) == 141
+    assert capsys.readouterr().err == ""
