@@ -105,7 +105,8 @@ def cmd_verify(args) -> int:
     print(f"CORRUPT: {len(report.problems)} problem(s) in {report.root}", file=sys.stderr)
     for p in report.problems:
         print(f"  {p}", file=sys.stderr)
-    print(f"  fix: `d5rl generate {args.task}` regenerates the missing and damaged shards (intact ones are kept)",
+    again = f"d5rl generate {args.task}" + (f" --seed {args.seed}" if args.seed is not None else "")
+    print(f"  fix: `{again}` regenerates the missing and damaged shards (intact ones are kept)",
           file=sys.stderr)
     return 1
 
@@ -132,6 +133,10 @@ def cmd_render(args) -> int:
 
         if args.episode < 0:
             raise D5RLError(f"--episode must be >= 0, got {args.episode}", "episodes are numbered from 0")
+        total = spec.dataset.num_episodes if spec.dataset is not None else 0
+        if args.episode >= total:
+            raise D5RLError(f"{args.task}'s dataset has no episode {args.episode}",
+                            f"its episodes are numbered 0 to {total - 1}" if total else "this task has no dataset")
         # camera tasks: states are enough to replay; no camera-frame cache is built for this
         kwargs = {"render": False} if spec.dataset is not None and spec.dataset.derived else {}
         ds = load_dataset(args.task, episodes=args.episode + 1, generate=False, progress=False, in_memory=False,

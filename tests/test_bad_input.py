@@ -103,6 +103,21 @@ def test_eval_episodes(capsys, tmp_path):
     one_line_error(capsys, ["eval", str(tmp_path), "--episodes", "0"], "--episodes must be at least 1")
 
 
+def test_calibrate_episodes(capsys):
+    one_line_error(capsys, ["calibrate", "a1-walk-v0", "--episodes", "0"], "--episodes must be at least 1")
+
+
+def test_render_names_the_episodes_there_are(capsys, tmp_path):
+    one_line_error(capsys, ["render", "a1-walk-v0", "--episode", "99999", "--out", str(tmp_path / "x.mp4")],
+                   "no episode 99999", "numbered 0 to 226")
+    assert not paths.home().exists() and not (tmp_path / "x.mp4").exists()
+
+
+def test_verify_hint_keeps_the_seed(capsys):
+    assert main(["verify", "a1-walk-v0", "--seed", "7"]) == 1
+    assert "`d5rl generate a1-walk-v0 --seed 7`" in capsys.readouterr().err
+
+
 def test_evaluate_refuses_zero_episodes():
     from d5rl.errors import D5RLError
     from d5rl.training.evaluation import evaluate

@@ -30,7 +30,8 @@ def verify_dataset(task: str | TaskSpec, seed: int | None = None, progress: bool
     manifest_path = root / fmt.MANIFEST
     if not manifest_path.exists():
         hint = "generation did not finish" if (root / "shards").exists() else "it was never generated"
-        return VerifyReport(root, 0, [f"{manifest_path}: missing ({hint}; run `d5rl generate {spec.id}`)"])
+        again = f"d5rl generate {spec.id}" + (f" --seed {seed}" if seed is not None else "")
+        return VerifyReport(root, 0, [f"{manifest_path}: missing ({hint}; run `{again}`)"])
     try:
         manifest = fmt.read_manifest(manifest_path)
     except D5RLError as e:

@@ -82,6 +82,10 @@ def add_calibrate_parser(subparsers) -> None:
     q.add_argument("--dry-run", action="store_true", help="print, do not write scores.json")
 
     def run(args) -> int:
+        if args.episodes < 1:
+            from d5rl.errors import D5RLError
+
+            raise D5RLError(f"--episodes must be at least 1, got {args.episodes}", "the references use 20")
         result = calibrate(args.task, args.episodes, args.seed)
         print(json.dumps(result, indent=1))
         if not args.dry_run:
