@@ -11,7 +11,8 @@ from d5rl.runner import report
 
 
 def run_summary(run_dir: Path) -> dict:
-    """Cells, mean learning curves per (task, algorithm), final-score tables and videos of one run."""
+    """Cells, mean learning curves per (task, algorithm), final-score tables, what the agents did (the tasks'
+    episode statistics) and videos of one run."""
     run_dir = Path(run_dir)
     results = report.collect(run_dir)
     by_task: dict[str, list] = {}
@@ -35,4 +36,5 @@ def run_summary(run_dir: Path) -> dict:
               "final": r.final, "evaluations": len(r.evals), "failures": r.failures,
               "videos": [os.path.relpath(v, run_dir) for v in r.videos[-report.VIDEOS_PER_CELL:]]}
              for r in sorted(results, key=lambda r: (r.task, r.algo, r.seed))]
-    return {"name": run_dir.name, "path": str(run_dir), "cells": cells, "curves": curves, "tables": tables}
+    return {"name": run_dir.name, "path": str(run_dir), "cells": cells, "curves": curves, "tables": tables,
+            "behaviour": report.behaviour_table(results), "behaviour_note": report.BEHAVIOUR_NOTE}

@@ -274,34 +274,50 @@ def protocol_markdown(results: list[CellResult]) -> str | None:
     return "\n".join(lines) + "\n"
 
 
-def behaviour_markdown(results: list[CellResult]) -> str | None:
+BEHAVIOUR_NOTE = (
+    "Per task, what the final evaluation's episodes did, from the statistics the task reports per episode, "
+    "averaged over episodes and then over the cells that recorded them (cells from before 2026-11-26 did not). "
+    "Kitchen: the fraction of episodes in which each subtask's object reached its goal configuration, counted by "
+    "the task or not; WidowX: the object was lifted off the table, ends in its bin, ends in the other bin; A1: "
+    "mean forward speed (m/s), episodes that ended early (a fall, or off the course), waypoints reached.")
+
+
+def behaviour_table(results: list[CellResult]) -> list[dict]:
     """What the agents did in their final evaluation, from the statistics their task reports per episode (the
-    kitchen: which subtasks were done; WidowX: each object lifted, in its bin, in the other): per task and method,
-    the mean over the finished cells that recorded them."""
+    kitchen: which subtasks were done; WidowX: each object lifted, in its bin, in the other; A1: speed, falls):
+    per task (paper order) a row per method with the mean of each statistic over the finished cells that
+    recorded it (None where none did)."""
     groups: dict[str, dict[str, list[dict]]] = {}
     for r in results:
         if r.counts and r.stats:
             groups.setdefault(r.task, {}).setdefault(r.algo, []).append(r.stats)
-    if not groups:
-        return None
-    lines = ["### What the agents do", "",
-             "Per task, what the final evaluation's episodes did, from the statistics the task reports per "
-             "episode, averaged over episodes and then over the cells that recorded them (cells from before "
-             "2026-11-26 did not). Kitchen: the fraction of episodes in which each subtask's object reached its "
-             "goal configuration, counted by the task or not; WidowX: the object was lifted off the table, ends "
-             "in its bin, ends in the other bin; A1: mean forward speed (m/s), episodes that ended early (a "
-             "fall, or off the course), waypoints reached.", ""]
+    out = []
     for task in sorted(groups, key=lambda t: (_env_order(environment(t)), environment(t), t)):
         by_algo = groups[task]
         keys = sorted(set().union(*(st for cells in by_algo.values() for st in cells)))
-        head = [k.removeprefix("subtask/").replace("_", " ") for k in keys]
-        lines += [f"**{task}**", "", "| Method | Cells | " + " | ".join(head) + " |",
-                  "|---|---|" + "---|" * len(keys)]
+        rows = []
         for algo in _method_order(by_algo):
-            cells = by_algo[algo]
-            vals = [[st[k] for st in cells if k in st] for k in keys]
-            lines.append(f"| {method_name(algo)} | {len(cells)} | "
-                         + " | ".join(_fmt(float(np.mean(v)), 2) if v else "-" for v in vals) + " |")
+            vals = {k: [st[k] for st in by_algo[algo] if k in st] for k in keys}
+            rows.append({"algo": algo, "method": method_name(algo), "cells": len(by_algo[algo]),
+                         "stats": {k: float(np.mean(v)) if v else None for k, v in vals.items()}})
+        out.append({"task": task, "keys": keys, "labels": [k.removeprefix("subtask/").replace("_", " ") for k in keys],
+                    "rows": rows})
+    return out
+
+
+def behaviour_markdown(results: list[CellResult]) -> str | None:
+    """:func:`behaviour_table` as Markdown, or None when no cell recorded statistics."""
+    tables = behaviour_table(results)
+    if not tables:
+        return None
+    lines = ["### What the agents do", "", BEHAVIOUR_NOTE, ""]
+    for t in tables:
+        lines += [f"**{t['task']}**", "", "| Method | Cells | " + " | ".join(t["labels"]) + " |",
+                  "|---|---|" + "---|" * len(t["keys"])]
+        for row in t["rows"]:
+            vals = [row["stats"][k] for k in t["keys"]]
+            lines.append(f"| {row['method']} | {row['cells']} | "
+                         + " | ".join("-" if v is None else _fmt(v, 2) for v in vals) + " |")
         lines.append("")
     return "\n".join(lines)
 

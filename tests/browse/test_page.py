@@ -116,3 +116,25 @@ def test_click_into_an_episode_and_scrub(tmp_path):
             ctx.close()
     assert not errors, errors
     assert requests and all(u.startswith(server.url) or u.startswith("data:") for u in requests), requests
+
+
+def test_runs_view_shows_what_the_agents_do(tmp_path):
+    from playwright.sync_api import sync_playwright
+
+    from tests.browse.test_server import _run_dir
+
+    errors = []
+    with Server([_run_dir(tmp_path / "run")]) as server, sync_playwright() as p:
+        ctx = browser(p, tmp_path)
+        try:
+            page = ctx.new_page()
+            page.set_default_timeout(20_000)
+            page.on("pageerror", lambda e: errors.append(str(e)))
+            page.goto(server.url + "/#/runs")
+            page.wait_for_selector("text=What the agents do")
+            table = page.locator("table.scores").last.inner_text()
+            assert "reached" in table and "0.500" in table  # the mean of the two seeds' 0.25 and 0.75
+            shot(page, "runs")
+        finally:
+            ctx.close()
+    assert not errors, errors

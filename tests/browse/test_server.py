@@ -152,6 +152,7 @@ def _run_dir(root: Path) -> Path:
             for step, s in zip((50, 100), scores):
                 f.write(json.dumps({"step": step, "eval/toy-reach-v0/score": s}) + "\n")
         (d / "done").write_text("{}")
+        (d / "summary.json").write_text(json.dumps({"stats": {"reached": 0.25 + 0.5 * seed}}))
         (d / "videos").mkdir()
         (d / "videos" / "final.mp4").write_bytes(b"\x00\x00\x00\x18ftypmp42")
     return root
@@ -167,6 +168,9 @@ def test_runs_curves_tables_and_videos(tmp_path):
     np.testing.assert_allclose(curve["mean"], [0.2, 0.6]) and np.testing.assert_allclose(curve["std"], [0.1, 0.1])
     (row,) = body["tables"]["offline"]
     assert row["n"] == 2 and row["mean"] == pytest.approx(0.6) and row["std"] == pytest.approx(0.1)
+    (what,) = body["behaviour"]  # the task's episode stats, mean over the two seeds
+    assert what["task"] == "toy-reach-v0" and what["rows"][0]["cells"] == 2
+    assert what["rows"][0]["stats"]["reached"] == pytest.approx(0.5)
     video = body["cells"][0]["videos"][0]
     assert video == "toy-reach-v0/bc/seed0/videos/final.mp4"
     r = c.get(f"/api/runs/0/files/{video}")

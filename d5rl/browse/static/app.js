@@ -226,6 +226,17 @@ async function runsView() {
         return h("td", { text: r ? `${num(r.mean)} ± ${num(r.std)} (n=${r.n})` : "–" });
       })))));
   }
+  const behaviour = all.flatMap((run) => (run.behaviour || []).map((t) => [run, t]));
+  if (behaviour.length) {
+    app.append(h("h2", { text: "What the agents do (final evaluation)" }), h("p", { class: "muted", text: all[0].behaviour_note }));
+    for (const [run, t] of behaviour) {
+      app.append(h("h3", { text: all.length > 1 ? `${run.name}: ${t.task}` : t.task }));
+      app.append(h("table", { class: "scores" }, h("tr", {}, h("th", { text: "method" }), h("th", { text: "cells" }),
+        t.labels.map((l) => h("th", { text: l }))),
+        t.rows.map((r) => h("tr", {}, h("td", { text: r.method }), h("td", { text: String(r.cells) }),
+          t.keys.map((k) => h("td", { text: r.stats[k] === null ? "–" : num(r.stats[k]) }))))));
+    }
+  }
   const videos = all.flatMap((run) => run.cells.flatMap((c) => c.videos.map((v) => [run, c, v])));
   if (videos.length) {
     app.append(h("h2", { text: "Rollout videos" }));
