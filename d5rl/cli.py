@@ -96,7 +96,7 @@ def cmd_generate(args) -> int:
 
 
 def cmd_verify(args) -> int:
-    from d5rl.datasets.verify import verify_dataset
+    from d5rl.datasets.verify import regenerate_command, verify_dataset
 
     report = verify_dataset(args.task, seed=args.seed, progress=True)
     if report.ok:
@@ -105,8 +105,8 @@ def cmd_verify(args) -> int:
     print(f"CORRUPT: {len(report.problems)} problem(s) in {report.root}", file=sys.stderr)
     for p in report.problems:
         print(f"  {p}", file=sys.stderr)
-    again = f"d5rl generate {args.task}" + (f" --seed {args.seed}" if args.seed is not None else "")
-    print(f"  fix: `{again}` regenerates the missing and damaged shards (intact ones are kept)",
+    print(f"  fix: `{regenerate_command(args.task, args.seed)}` regenerates the missing and damaged shards "
+          "(intact ones are kept)",
           file=sys.stderr)
     return 1
 
@@ -133,10 +133,11 @@ def cmd_render(args) -> int:
 
         if args.episode < 0:
             raise D5RLError(f"--episode must be >= 0, got {args.episode}", "episodes are numbered from 0")
-        total = spec.dataset.num_episodes if spec.dataset is not None else 0
-        if args.episode >= total:
+        n_episodes = spec.dataset.num_episodes if spec.dataset is not None else 0
+        if args.episode >= n_episodes:
             raise D5RLError(f"{args.task}'s dataset has no episode {args.episode}",
-                            f"its episodes are numbered 0 to {total - 1}" if total else "this task has no dataset")
+                            f"its episodes are numbered 0 to {n_episodes - 1}" if n_episodes
+                            else "this task has no dataset")
         # camera tasks: states are enough to replay; no camera-frame cache is built for this
         kwargs = {"render": False} if spec.dataset is not None and spec.dataset.derived else {}
         ds = load_dataset(args.task, episodes=args.episode + 1, generate=False, progress=False, in_memory=False,

@@ -22,6 +22,11 @@ class VerifyReport:
         return not self.problems
 
 
+def regenerate_command(task_id: str, seed: int | None = None) -> str:
+    """The command that regenerates what verification finds missing or damaged (intact shards are kept)."""
+    return f"d5rl generate {task_id}" + (f" --seed {seed}" if seed is not None else "")
+
+
 def verify_dataset(task: str | TaskSpec, seed: int | None = None, progress: bool = False) -> VerifyReport:
     """Re-hash every array of the dataset (and its derived caches) against its records."""
     spec = get_spec(task)
@@ -30,8 +35,7 @@ def verify_dataset(task: str | TaskSpec, seed: int | None = None, progress: bool
     manifest_path = root / fmt.MANIFEST
     if not manifest_path.exists():
         hint = "generation did not finish" if (root / "shards").exists() else "it was never generated"
-        again = f"d5rl generate {spec.id}" + (f" --seed {seed}" if seed is not None else "")
-        return VerifyReport(root, 0, [f"{manifest_path}: missing ({hint}; run `{again}`)"])
+        return VerifyReport(root, 0, [f"{manifest_path}: missing ({hint}; run `{regenerate_command(spec.id, seed)}`)"])
     try:
         manifest = fmt.read_manifest(manifest_path)
     except D5RLError as e:

@@ -60,6 +60,7 @@ FRAME_SKIP = 40  # 40 x 2 ms = 0.08 s control step
 ACTION_SCALE = 2.0  # rad/s (m/s for fingers) at |action| = 1
 CAMERAS = ("overview", "wrist")
 OBS_MODES = ("pixels", "state")
+SUBTASK_STAT_KEYS = tuple(f"subtask/{n.replace(' ', '_')}" for n in SUBTASK_NAMES)  # info["episode_stats"] keys
 
 
 class KitchenEnv(MujocoEnv):
@@ -136,7 +137,7 @@ class KitchenEnv(MujocoEnv):
             "solved": self._solved.copy(),
             "score": float(self._solved.mean()),
             "success": bool(self._solved.all()),
-            "episode_stats": {f"subtask/{n.replace(' ', '_')}": float(r) for n, r in zip(SUBTASK_NAMES, self._reached)},
+            "episode_stats": {k: float(r) for k, r in zip(SUBTASK_STAT_KEYS, self._reached)},
         }
 
     def _begin_episode(self, completed: np.ndarray) -> None:
