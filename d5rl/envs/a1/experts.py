@@ -109,6 +109,7 @@ class Trainer:
         self.work_dir, self.policy_dir, self.init_from = Path(work_dir), Path(policy_dir), init_from
         self.saved_root = None if saved_root is None else Path(saved_root)  # exported checkpoints (no buffers)
         self.config = learner_config(utd)
+        self.prior_seconds = 0.0  # training time of earlier sittings (set by a resume)
         self.envs = [make_env(a) for a in agents]
         self.obs_dim = dims.pop()
         self.k = len(agents)
@@ -165,7 +166,7 @@ class Trainer:
         return jax.vmap(one)(learners, obs, jax.random.split(key, obs.shape[0]))
 
     # --- checkpoints ---------------------------------------------------------------------------------
-    def _save(self, learners, t: int, rng, key, segments) -> None:
+    def _save(self, learners, t: int, rng, key, segments, seconds: float) -> None:
         import flax
 
         from d5rl.training.checkpoint import Checkpoint, save_checkpoint
@@ -173,6 +174,7 @@ class Trainer:
         state = {"agents": self.names, "t": t, "steps": self.steps, "seed": self.seed, "utd": self.utd,
                  "snapshot_every": self.snapshot_every, "first_segment": self.first_segment,
                  "start_steps": self.start_steps, "rng": rng.bit_generator.state, "key": np.asarray(key).tolist(),
+                 "train_seconds": round(seconds),
                  "segments": [[dataclasses.asdict(s) for s in segs] for segs in segments]}
         buffer = {k: v[:, :t] for k, v in self.buf.items()}
         self.work_dir.mkdir(parents=True, exist_ok=True)
@@ -203,6 +205,10 @@ class Trainer:
             print(f"[{'+'.join(self.names)}] {ckpt.path} has no replay buffer: refilling {t} steps per agent "
                   "by replaying the snapshots", flush=True)
             refill_buffer(self.buf, t, segments, self.names, self.envs, self.policy_dir, self.seed)
+        # training time of the earlier sittings (checkpoints from before it was stored: the agents' logs)
+        logs = [self.policy_dir / n / "log.json" for n in self.names]
+        earlier = [json.loads(f.read_text()).get("train_seconds", 0) for f in logs if f.exists()]
+        self.prior_seconds = s.get("train_seconds", max(earlier, default=0))
         rng = np.random.default_rng()
         rng.bit_generator.state = s["rng"]
         return flax.serialization.from_bytes(learners, ckpt.agent), t, rng, np.asarray(s["key"], np.uint32), segments
@@ -324,8 +330,9 @@ class Trainer:
                 name = f"snapshot-{len(segments[i]):02d}.npz"
                 self._snapshot(learners, i, name)
                 segments[i].append(Segment(name, t))
-        self._write_logs(segments, t, time.time() - t0)
-        self._save(learners, t, rng, key, segments)
+        seconds = self.prior_seconds + time.time() - t0  # over every sitting
+        self._write_logs(segments, t, seconds)
+        self._save(learners, t, rng, key, segments, seconds)
         if final:
             out = self.work_dir.parent / "learners"
             out.mkdir(parents=True, exist_ok=True)

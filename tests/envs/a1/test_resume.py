@@ -25,6 +25,11 @@ def test_exported_checkpoint_resumes_on_a_machine_without_the_buffer(tmp_path):
     assert saved.buffer is None and saved.agent == full.agent and saved.state == full.state
     assert not (tmp_path / "saved" / "checkpoints" / "speed-0.5+run-1.25" / "checkpoint.prev").exists()
 
+    # training time adds up over sittings: pretend the first sitting took 1000 s
+    from d5rl.training.checkpoint import Checkpoint, save_checkpoint
+
+    save_checkpoint(tmp_path / "saved" / "checkpoints" / "speed-0.5+run-1.25",
+                    Checkpoint(saved.agent, {**saved.state, "train_seconds": 1000}))
     b = trainer(tmp_path / "machine-b")  # no checkpoint of its own
     learners = b._new_learners()
     _, t, _, _, segments = b._load(learners)
@@ -39,6 +44,25 @@ def test_exported_checkpoint_resumes_on_a_machine_without_the_buffer(tmp_path):
     assert b.run(log_every=10**9)  # and training finishes from there
     log = json.loads((tmp_path / "policies" / "speed-0.5" / "log.json").read_text())
     assert [s["start_step"] for s in log["segments"]] == [0, 30, 60]
+    assert 1000 <= log["train_seconds"] < 1000 + 600
+
+
+def test_training_time_of_a_checkpoint_from_before_it_was_stored_comes_from_the_logs(tmp_path):
+    from d5rl.envs.a1.experts import Trainer
+    from d5rl.training.checkpoint import Checkpoint, load_checkpoint, save_checkpoint
+
+    def trainer():
+        return Trainer(["speed-0.5"], steps=60, seed=0, snapshot_every=30, start_steps=30, utd=1,
+                       work_dir=tmp_path / "work", policy_dir=tmp_path / "policies")
+
+    assert not trainer().run(max_minutes=0, log_every=10**9)
+    ckpt = load_checkpoint(tmp_path / "work")
+    old_state = {k: v for k, v in ckpt.state.items() if k != "train_seconds"}
+    save_checkpoint(tmp_path / "work", Checkpoint(ckpt.agent, old_state, ckpt.buffer))
+    log_file = tmp_path / "policies" / "speed-0.5" / "log.json"
+    log_file.write_text(json.dumps({**json.loads(log_file.read_text()), "train_seconds": 500}))
+    assert trainer().run(log_every=10**9)
+    assert json.loads(log_file.read_text())["train_seconds"] >= 500
 
 
 def test_publish_ships_a_data_agents_snapshots_and_a_reference_agents_final_policy(tmp_path):
