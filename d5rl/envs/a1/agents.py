@@ -38,7 +38,9 @@ AGENTS = {
     "speed-1.0": AgentSpec(1.0),
     "heading": AgentSpec(0.75, "heading"),  # flat ground, a heading command that turns every 100 steps
     # score references only (not in any dataset)
-    "run-1.25": AgentSpec(1.25, role="reference"),  # a1-run-v0: really runs at 1.25 m/s
+    # a1-run-v0's: trained on the run task's own reward (the fastest this actuation allows, ~0.85-0.9 m/s,
+    # not 1.25: data card, "How fast can this A1 go?")
+    "run-1.25": AgentSpec(1.25, role="reference"),
     "hiking": AgentSpec(0.75, "waypoints", "course", role="reference", band=(-0.1, 0.1), episode_steps=1000),
 }
 

@@ -3,9 +3,11 @@
     d5rl calibrate a1-walk-v0 [--episodes 20]
 
 ``random`` is the mean return of uniform random actions; ``expert`` is the mean
-return of the best data-collecting agent's final policy (deterministic actions)
-on the task itself.  A normalized score of 1 therefore means "as good as the best
-policy that produced the data", 0 "as good as random actions".  Each agent's mean forward
+return of the best final policy (deterministic actions) on the task itself among the
+task's data agents and the reference agent trained for it (``registration.SCORE_AGENTS``:
+``run-1.25`` for walk and run, ``hiking`` for the course).  A normalized score of 1
+therefore means "as good as the best agent we trained for this task", 0 "as good as
+random actions".  Each agent's mean forward
 speed over its episodes is recorded with its return (``d5rl info`` shows the expert's).
 """
 
@@ -18,10 +20,10 @@ import numpy as np
 
 from d5rl.envs.a1.agents import POLICY_DIR
 from d5rl.envs.a1.policy import SnapshotPolicy
-from d5rl.envs.a1.registration import HIKING_AGENTS, SCORES_FILE, SPEED_AGENTS
+from d5rl.envs.a1.registration import SCORE_AGENTS, SCORES_FILE
 from d5rl.registry import get_spec, make_env
 
-CANDIDATES = {"a1-walk-v0": SPEED_AGENTS, "a1-run-v0": SPEED_AGENTS, "a1-hiking-v0": HIKING_AGENTS}  # shipped agents
+CANDIDATES = SCORE_AGENTS
 
 
 def evaluate(task_id: str, policy: SnapshotPolicy, episodes: int, seed: int, deterministic: bool = True,

@@ -2,8 +2,9 @@
 
     python -m d5rl.envs.a1.datacard_stats          # reads the generated datasets (d5rl generate first)
 
-Prints Markdown: size, per-agent composition, return distributions under each
-task's relabelled reward, and a histogram of the forward speed in the data.
+Prints Markdown: size, per-agent composition (and how fast each agent's last snapshot walks in
+the data), return distributions under each task's relabelled reward, and histograms of the
+forward speed in the data, overall and per agent.
 """
 
 from __future__ import annotations
@@ -20,14 +21,23 @@ def episode_returns(ds) -> np.ndarray:
     return np.add.reduceat(np.asarray(ds.rewards, np.float64), ds.episode_starts)
 
 
-def speed_histogram(speeds: np.ndarray, lo=-0.2, hi=1.4, width=0.1) -> str:
+def speed_histogram(columns: dict[str, np.ndarray], lo=-0.2, hi=1.2, width=0.1) -> str:
+    """Share of steps per forward-speed bin, one column per group of steps (the last bin is open)."""
     edges = np.arange(lo, hi + 1e-9, width)
-    counts, _ = np.histogram(np.clip(speeds, lo, hi - 1e-9), edges)
-    frac = counts / max(counts.sum(), 1)
-    rows = ["| forward speed (m/s) | share of steps | |", "|---|---:|---|"]
-    for a, b, f in zip(edges[:-1], edges[1:], frac):
-        rows.append(f"| {a:+.1f} … {b:+.1f} | {100 * f:5.1f}% | {'█' * int(round(60 * f))} |")
+    shares = {}
+    for name, speeds in columns.items():
+        counts, _ = np.histogram(np.clip(speeds, lo, hi - 1e-9), edges)
+        shares[name] = counts / max(counts.sum(), 1)
+    rows = ["| forward speed (m/s) | " + " | ".join(shares) + " |", "|---|" + "---:|" * len(shares)]
+    for i, (a, b) in enumerate(zip(edges[:-1], edges[1:])):
+        label = f"≥ {a:+.1f}" if i == len(edges) - 2 else f"{a:+.1f} … {b:+.1f}"
+        rows.append(f"| {label} | " + " | ".join(f"{100 * f[i]:.1f}%" for f in shares.values()) + " |")
     return "\n".join(rows)
+
+
+def _steps(ds, i: int) -> slice:
+    start = int(ds.episode_starts[i])
+    return slice(start, start + int(ds.episode_lengths[i]))
 
 
 def describe(task_ids: tuple[str, ...]) -> str:
@@ -36,12 +46,18 @@ def describe(task_ids: tuple[str, ...]) -> str:
     out = [f"### `{ds.metadata['dataset']}` (used by {', '.join(f'`{t}`' for t in task_ids)})", ""]
     out.append(f"- episodes: {ds.num_episodes}, transitions: {ds.num_transitions}, "
                f"terminated by a fall: {100 * np.mean([bool(ds.terminals[s + n - 1]) for s, n in zip(ds.episode_starts, ds.episode_lengths)]):.1f}% of episodes")
+    speed = np.asarray(ds.arrays["infos/forward_speed"])
     agents = sorted({m["agent"] for m in meta})
+    columns = {"all steps": speed}
     for a in agents:
         sel = [i for i, m in enumerate(meta) if m["agent"] == a]
         rand = sum(m["snapshot"] == "random" for m in (meta[i] for i in sel))
         steps = int(ds.episode_lengths[sel].sum())
-        out.append(f"- agent `{a}`: {len(sel)} episodes ({rand} before learning, uniform random actions), {steps} steps")
+        last = max(meta[i]["segment"] for i in sel)
+        last_speeds = [speed[_steps(ds, i)].mean() for i in sel if meta[i]["segment"] == last]
+        out.append(f"- agent `{a}`: {len(sel)} episodes ({rand} before learning, uniform random actions), {steps} steps; "
+                   f"its last snapshot's {len(last_speeds)} episodes: mean forward speed {np.mean(last_speeds):.3f} m/s")
+        columns[f"`{a}`"] = np.concatenate([speed[_steps(ds, i)] for i in sel])
     out.append("")
     out.append("| task | return mean ± std | 10% / 50% / 90% quantile | normalized (mean) |")
     out.append("|---|---|---|---|")
@@ -53,7 +69,7 @@ def describe(task_ids: tuple[str, ...]) -> str:
         q = np.quantile(r, [0.1, 0.5, 0.9])
         out.append(f"| `{tid}` | {r.mean():.1f} ± {r.std():.1f} | {q[0]:.1f} / {q[1]:.1f} / {q[2]:.1f} | {norm} |")
     out.append("")
-    out.append(speed_histogram(np.asarray(ds.arrays["infos/forward_speed"])))
+    out.append(speed_histogram(columns))
     return "\n".join(out)
 
 

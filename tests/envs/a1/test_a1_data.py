@@ -13,7 +13,7 @@ from d5rl.envs.a1.policy import SnapshotPolicy
 
 
 def test_data_agents_policies_ship_with_the_package():
-    # (reference agents ship their final policy once trained; `calibrate.CANDIDATES` lists the shipped ones)
+    # (reference agents ship their final policy only; `registration.SCORE_AGENTS` lists the candidates)
     for agent in (a for a, spec in AGENTS.items() if spec.role == "data"):
         log = POLICY_DIR / agent / "log.json"
         assert log.exists() and (POLICY_DIR / agent / "final.npz").exists(), agent
@@ -125,3 +125,14 @@ def test_calibration_records_the_experts_speed(monkeypatch, capsys):
     assert ref.expert == 300.0 and ref.expert_note == "'speed-0.8' runs 0.70 m/s on average on this task"
     assert main(["info", "a1-walk-v0"]) == 0
     assert "the expert: 'speed-0.8' runs" in capsys.readouterr().out  # the committed scores.json has speeds
+
+
+def test_speed_histogram_shares_per_column():
+    from d5rl.envs.a1.datacard_stats import speed_histogram
+
+    table = speed_histogram({"a": np.array([0.05, 0.05, 0.55, 2.0]), "b": np.array([-1.0])}).splitlines()
+    assert table[0] == "| forward speed (m/s) | a | b |"
+    rows = {r.split(" | ")[0].lstrip("| "): r.split(" | ")[1:] for r in table[2:]}
+    assert rows["-0.2 … -0.1"] == ["0.0%", "100.0% |"]  # below the range: the first bin
+    assert rows["+0.0 … +0.1"][0] == "50.0%" and rows["+0.5 … +0.6"][0] == "25.0%"
+    assert rows["≥ +1.1"][0] == "25.0%"  # the last bin is open
