@@ -45,6 +45,17 @@ AGENTS = {
 }
 
 
+def describe(agent: str, policy_dir: Path = POLICY_DIR) -> str:
+    """How an agent was made, from its spec and its training log: "SAC, 83,750 steps, tracking 0.8 m/s on flat ground"."""
+    from d5rl.envs.a1.buffers import agent_log
+
+    spec = AGENTS[agent]
+    steps = agent_log(agent, str(policy_dir))["steps"]
+    where = "on the hiking course past its waypoints" if spec.terrain == "course" else (
+        "on flat ground, following a turning heading command" if spec.command == "heading" else "on flat ground")
+    return f"SAC, {steps:,} steps, tracking {spec.target_speed} m/s {where}"
+
+
 def make_env(agent: str):
     from d5rl.envs.a1.task import A1Env
 

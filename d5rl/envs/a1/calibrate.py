@@ -18,7 +18,7 @@ from pathlib import Path
 
 import numpy as np
 
-from d5rl.envs.a1.agents import POLICY_DIR
+from d5rl.envs.a1.agents import POLICY_DIR, describe
 from d5rl.envs.a1.policy import SnapshotPolicy
 from d5rl.envs.a1.registration import SCORE_AGENTS, SCORES_FILE
 from d5rl.registry import get_spec, make_env
@@ -63,6 +63,7 @@ def calibrate(task_id: str, episodes: int = 20, seed: int = 0) -> dict:
         "expert": round(best, 3),
         "expert_agent": best_agent,
         "expert_speed": per_agent_speed[best_agent],  # m/s, mean forward speed of its episodes
+        "expert_trained": describe(best_agent),
         "per_agent": per_agent,
         "per_agent_speed": per_agent_speed,
         "source": f"d5rl calibrate {task_id} --episodes {episodes} --seed {seed}: mean return of uniform random "

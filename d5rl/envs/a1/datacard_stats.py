@@ -44,7 +44,7 @@ def describe(task_ids: tuple[str, ...]) -> str:
     ds = load_dataset(task_ids[0], generate=False, progress=False)
     meta = ds.episode_meta
     out = [f"### `{ds.metadata['dataset']}` (used by {', '.join(f'`{t}`' for t in task_ids)})", ""]
-    out.append(f"- episodes: {ds.num_episodes}, transitions: {ds.num_transitions}, "
+    out.append(f"- episodes: {ds.num_episodes:,}, transitions: {ds.num_transitions:,}, "
                f"terminated by a fall: {100 * np.mean([bool(ds.terminals[s + n - 1]) for s, n in zip(ds.episode_starts, ds.episode_lengths)]):.1f}% of episodes")
     speed = np.asarray(ds.arrays["infos/forward_speed"])
     agents = sorted({m["agent"] for m in meta})
@@ -55,7 +55,7 @@ def describe(task_ids: tuple[str, ...]) -> str:
         steps = int(ds.episode_lengths[sel].sum())
         last = max(meta[i]["segment"] for i in sel)
         last_speeds = [speed[_steps(ds, i)].mean() for i in sel if meta[i]["segment"] == last]
-        out.append(f"- agent `{a}`: {len(sel)} episodes ({rand} before learning, uniform random actions), {steps} steps; "
+        out.append(f"- agent `{a}`: {len(sel)} episodes ({rand} before learning, uniform random actions), {steps:,} steps; "
                    f"its last snapshot's {len(last_speeds)} episodes: mean forward speed {np.mean(last_speeds):.3f} m/s")
         columns[f"`{a}`"] = np.concatenate([speed[_steps(ds, i)] for i in sel])
     out.append("")

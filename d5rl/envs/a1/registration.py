@@ -20,7 +20,8 @@ def _ref(task_id: str, scores: dict) -> ScoreRef | None:
     s = scores.get(task_id)
     if s is None:
         return None
-    note = (f"'{s['expert_agent']}' runs {s['expert_speed']:.2f} m/s on average on this task"
+    trained = f" ({s['expert_trained']})" if "expert_trained" in s else ""
+    note = (f"'{s['expert_agent']}'{trained} runs {s['expert_speed']:.2f} m/s on average on this task"
             if "expert_speed" in s else "")
     return ScoreRef(s["random"], s["expert"], s["source"], expert_note=note)
 

@@ -122,7 +122,10 @@ def test_calibration_records_the_experts_speed(monkeypatch, capsys):
     assert result["expert_agent"] == "speed-0.8" and result["expert_speed"] == 0.7
     assert result["per_agent_speed"] == {"speed-0.5": 0.5, "speed-0.8": 0.7}
     ref = _ref("a1-walk-v0", {"a1-walk-v0": result})
-    assert ref.expert == 300.0 and ref.expert_note == "'speed-0.8' runs 0.70 m/s on average on this task"
+    steps = data.agent_log("speed-0.8")["steps"]
+    assert result["expert_trained"] == f"SAC, {steps:,} steps, tracking 0.8 m/s on flat ground"
+    assert ref.expert == 300.0 and ref.expert_note == (
+        f"'speed-0.8' (SAC, {steps:,} steps, tracking 0.8 m/s on flat ground) runs 0.70 m/s on average on this task")
     assert main(["info", "a1-walk-v0"]) == 0
     assert "the expert: 'speed-0.8' runs" in capsys.readouterr().out  # the committed scores.json has speeds
 
