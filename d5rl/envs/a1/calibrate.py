@@ -23,8 +23,6 @@ from d5rl.envs.a1.policy import SnapshotPolicy
 from d5rl.envs.a1.registration import SCORE_AGENTS, SCORES_FILE
 from d5rl.registry import get_spec, make_env
 
-CANDIDATES = SCORE_AGENTS
-
 
 def evaluate(task_id: str, policy: SnapshotPolicy, episodes: int, seed: int, deterministic: bool = True,
              speeds: list | None = None) -> np.ndarray:
@@ -51,7 +49,7 @@ def calibrate(task_id: str, episodes: int = 20, seed: int = 0) -> dict:
     random_returns = evaluate(task_id, SnapshotPolicy(None), episodes, seed, deterministic=False)
     best_agent, best = None, -np.inf
     per_agent, per_agent_speed = {}, {}
-    for agent in CANDIDATES[task_id]:
+    for agent in SCORE_AGENTS[task_id]:
         speeds: list[float] = []
         ret = evaluate(task_id, SnapshotPolicy(POLICY_DIR / agent / "final.npz"), episodes, seed, speeds=speeds)
         per_agent[agent] = round(float(ret.mean()), 3)
@@ -79,7 +77,7 @@ def write_scores(task_id: str, result: dict, path: Path = SCORES_FILE) -> None:
 
 def add_calibrate_parser(subparsers) -> None:
     q = subparsers.add_parser("calibrate", help="measure an A1 task's random and expert reference returns")
-    q.add_argument("task", choices=sorted(CANDIDATES))
+    q.add_argument("task", choices=sorted(SCORE_AGENTS))
     q.add_argument("--episodes", type=int, default=20)
     q.add_argument("--seed", type=int, default=0)
     q.add_argument("--dry-run", action="store_true", help="print, do not write scores.json")

@@ -103,7 +103,7 @@ def test_calibration_records_the_experts_speed(monkeypatch, capsys):
     speeds: list = []
     ret = evaluate("a1-walk-v0", SnapshotPolicy(POLICY_DIR / "speed-0.8" / "final.npz"), 1, 0, speeds=speeds)
     assert len(ret) == len(speeds) == 1 and 0.3 < speeds[0] < 1.2  # the 0.8 m/s agent walks
-    monkeypatch.setattr(cal, "CANDIDATES", {"a1-walk-v0": ("speed-0.5", "speed-0.8")})
+    monkeypatch.setattr(cal, "SCORE_AGENTS", {"a1-walk-v0": ("speed-0.5", "speed-0.8")})
 
     class Named:  # stands for a snapshot: which agent it is
         def __init__(self, path):
@@ -127,7 +127,7 @@ def test_calibration_records_the_experts_speed(monkeypatch, capsys):
     assert ref.expert == 300.0 and ref.expert_note == (
         f"'speed-0.8' (SAC, {steps:,} steps, tracking 0.8 m/s on flat ground) runs 0.70 m/s on average on this task")
     assert main(["info", "a1-walk-v0"]) == 0
-    assert "the expert: 'speed-0.8' runs" in capsys.readouterr().out  # the committed scores.json has speeds
+    assert "the expert: 'speed-0.8' (SAC, " in capsys.readouterr().out  # the committed scores.json has both
 
 
 def test_speed_histogram_shares_per_column():
