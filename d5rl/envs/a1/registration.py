@@ -45,7 +45,7 @@ LOCOMOTION_DATA = DatasetSpec(
 )
 HIKING_DATA = DatasetSpec(
     name="a1-hiking",
-    version=0,
+    version=1,  # 1: the retrained heading agent (145,000 steps on the doubling segment schedule; was 30,000)
     generator="d5rl.envs.a1.data:ReplayBufferGenerator",
     num_episodes=num_episodes(HIKING_AGENTS),
     episodes_per_shard=8,
