@@ -65,25 +65,17 @@ def test_hiking_relabel_matches_heading_agent_reward():
 
 
 @pytest.mark.slow
-@pytest.mark.parametrize("agent", ["speed-0.5", "speed-0.8", "speed-1.0"])
-def test_final_expert_tracks_its_speed(agent):
-    target = AGENTS[agent].target_speed
-    from d5rl.envs.a1.agents import make_env
+@pytest.mark.parametrize("agent, low, high", [
+    ("speed-0.5", 0.475, 0.525), ("speed-0.8", 0.76, 0.84),  # the speed bar: within 5% of the target
+    ("speed-1.0", 0.85, 1.05),  # at this actuation's ceiling (~0.9 m/s, A1 data card), not at 1.0
+    ("hiking", 0.65, 0.85),  # the course reference, on the course
+])
+def test_shipped_agents_track_their_speed_without_falling(agent, low, high):
+    from d5rl.envs.a1.speedcheck import rollouts
 
-    env = make_env(agent)
-    policy = SnapshotPolicy(POLICY_DIR / agent / "final.npz")
-    rng = np.random.default_rng(0)
-    speeds, falls = [], 0
-    for ep in range(3):
-        obs, _ = env.reset(seed=ep)
-        for _ in range(400):
-            obs, _, term, _, info = env.step(policy(obs, rng, deterministic=True))
-            speeds.append(info["forward_speed"])
-            if term:
-                falls += 1
-                break
-    assert falls == 0
-    assert abs(np.mean(speeds[40:]) - target) < 0.25 * target + 0.1
+    r = rollouts(agent, episodes=2, seed=0, deterministic=True)  # whole episodes from rest, as `check`
+    assert not any(r["falls"])
+    assert low <= np.mean(r["speeds"]) <= high, r["speeds"]
 
 
 @pytest.mark.slow
