@@ -48,7 +48,7 @@ def main(argv=None) -> None:
     print("|---|---:|---:|---|---|")
     for k in args.min_segments:
         sel = np.flatnonzero(segment >= k)
-        rows = np.concatenate([np.arange(ds.episode_starts[i], ds.episode_starts[i] + ds.episode_lengths[i]) for i in sel])
+        rows = np.flatnonzero(segment[ds.transition_episode] >= k)  # their transitions
         scores, speeds = [], []
         for seed in args.seeds:
             r = evaluate(train_bc(obs[rows], act[rows], seed, args.steps), "a1-walk-v0", 10, seed=seed)

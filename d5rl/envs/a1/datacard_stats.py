@@ -35,11 +35,6 @@ def speed_histogram(columns: dict[str, np.ndarray], lo=-0.2, hi=1.2, width=0.1) 
     return "\n".join(rows)
 
 
-def _steps(ds, i: int) -> slice:
-    start = int(ds.episode_starts[i])
-    return slice(start, start + int(ds.episode_lengths[i]))
-
-
 def describe(task_ids: tuple[str, ...]) -> str:
     ds = load_dataset(task_ids[0], generate=False, progress=False)
     meta = ds.episode_meta
@@ -47,17 +42,18 @@ def describe(task_ids: tuple[str, ...]) -> str:
     out.append(f"- episodes: {ds.num_episodes:,}, transitions: {ds.num_transitions:,}, "
                f"terminated by a fall: {100 * np.mean([bool(ds.terminals[s + n - 1]) for s, n in zip(ds.episode_starts, ds.episode_lengths)]):.1f}% of episodes")
     speed = np.asarray(ds.arrays["infos/forward_speed"])
-    agents = sorted({m["agent"] for m in meta})
+    episode_speed = np.bincount(ds.transition_episode, weights=speed) / ds.episode_lengths
+    agent = np.array([m["agent"] for m in meta])
+    segment = np.array([m["segment"] for m in meta])
     columns = {"all steps": speed}
-    for a in agents:
-        sel = [i for i, m in enumerate(meta) if m["agent"] == a]
-        rand = sum(m["snapshot"] == "random" for m in (meta[i] for i in sel))
+    for a in sorted(set(agent)):
+        sel = np.flatnonzero(agent == a)
+        rand = sum(meta[i]["snapshot"] == "random" for i in sel)
         steps = int(ds.episode_lengths[sel].sum())
-        last = max(meta[i]["segment"] for i in sel)
-        last_speeds = [speed[_steps(ds, i)].mean() for i in sel if meta[i]["segment"] == last]
+        last = sel[segment[sel] == segment[sel].max()]
         out.append(f"- agent `{a}`: {len(sel)} episodes ({rand} before learning, uniform random actions), {steps:,} steps; "
-                   f"its last snapshot's {len(last_speeds)} episodes: mean forward speed {np.mean(last_speeds):.3f} m/s")
-        columns[f"`{a}`"] = np.concatenate([speed[_steps(ds, i)] for i in sel])
+                   f"its last snapshot's {len(last)} episodes: mean forward speed {episode_speed[last].mean():.3f} m/s")
+        columns[f"`{a}`"] = speed[agent[ds.transition_episode] == a]
     out.append("")
     out.append("| task | return mean ± std | 10% / 50% / 90% quantile | normalized (mean) |")
     out.append("|---|---|---|---|")
