@@ -1,17 +1,22 @@
 #!/bin/bash
 # Pixel Table 1 cells on a bare GPU machine with no network (the README's GPU runs, issue 21):
-#   BUDGET=560 bash scripts/gpu_pixels.sh        # the cells still missing: randomized kitchen, 100 episodes
+#   STEPS=3000 BUDGET=545 bash scripts/gpu_pixels.sh   # the cells still missing: randomized kitchen, 100 episodes
 #   CELLS="wx-sorting-v0:bc,iql:16:4 kitchen-standard-mixed-v0:iql:12:2" BUDGET=560 bash scripts/gpu_pixels.sh
 # CELLS lists TASK:ALGOS:GENERATE_WORKERS:BENCH_WORKERS[:SET,SET...]; each entry generates its data (one
 # entry at a time) and then runs its cells beside the others (the second line: the README's wx-sorting rows).
 # Call it again on the same (still warm) machine to go on: packages, data and cells live in .dwork/ of the
-# checkout (git-ignored), so a second call skips what is done and resumes unfinished cells from their
-# checkpoints.  LOCAL=1 skips the machine setup (a dry run here; CELLS and STEPS make it small).
+# checkout, which .gitignore names so that the device keeps it between calls (on 2026-11-26 it was ignored only
+# in .git/info/exclude, which does not travel, and the second call found it gone), so a second call skips what
+# is done and resumes unfinished cells from their checkpoints.  LOCAL=1 skips the machine setup (a dry run
+# here; CELLS and STEPS make it small).
 # The machine needs, in the checkout (git-ignored, prepared where pip works): .gl/ (libEGL/libGL .debs),
 # .whl/ (cp312 wheels of mujoco, mujoco-core, gymnasium, zstandard, xacro, flax, optax, ...), .assets/
 # (the extracted robot models, D5RL_ASSETS) and .dcache/<dataset>.json (this
-# machine's manifests, to compare the regenerated data).  Cells come back in $OUT/cells.tgz, with
-# their final checkpoints (for the report's rollout GIFs, or to evaluate again where a lease ended mid-evaluation).
+# machine's manifests, to compare the regenerated data).  The working tree travels with them (64 MiB in all):
+# move experiments/a1-agents/ and docs/results/table1-state/videos/ (57 MB, not used there) out of the checkout
+# for the call and put them back after it.  Cells come back in $OUT/cells.tgz, with
+# their final checkpoints (for the report's rollout GIFs, or to evaluate again where a lease ended mid-evaluation),
+# split into parts under the device's 16 MiB a file (cat cells.tgz.part-* | tar xz).
 T0=$(date +%s); BUDGET=${BUDGET:-540}; W=$PWD/.dwork
 left() { echo $(( BUDGET - ($(date +%s) - T0) )); }
 stamp() { echo "[$(( $(date +%s) - T0 ))s] $*"; }
@@ -27,8 +32,11 @@ fi
 python3 -c "import jax, flax, optax, mujoco, numpy; print('versions', jax.__version__, flax.__version__, optax.__version__, mujoco.__version__, numpy.__version__, jax.devices())" || exit 4
 CELLS=${CELLS:-"kitchen-randomized-mixed-v0:bc,iql:16:2:dataset_episodes=100"}
 # dataset_in_memory_gb: the frames are decoded into RAM once (wx-sorting: 12 GB a cell) instead of at every
-# batch; checkpoint_interval: a call cut short loses at most 1,000 steps a cell (both are execution-only)
+# batch; checkpoint_interval: a call cut short loses at most 1,000 steps a cell; eval_processes: the final
+# evaluation steps its 5 environments in 5 processes (one process could not finish 50 episodes of the randomized
+# kitchen, 500 steps and 3 cameras each, in 260 s while two IQL cells trained beside it).  All are execution-only.
 B="--seeds 0-1 --offline-steps ${STEPS:-5000} --no-report --no-progress --set dataset_in_memory_gb=16 --set checkpoint_interval=1000"
+B="$B --set eval_processes=true"
 cli() { local t=$1; shift; timeout $t python3 -m d5rl.cli "$@"; }
 gen() { local s=$(date +%s); cli $(( $(left) - 20 )) generate "$@" 2>&1 | tr '\r' '\n' | grep -v "it/s\|ep/s" | tail -2
         stamp "generate+render $*: $(( $(date +%s) - s )) s"; }
@@ -56,5 +64,6 @@ for d in sorted(glob.glob(sys.argv[1] + "/*/*/*/seed*")):
     print(d, "steps", rows[-1].get("step") if rows else None, "ups", ups[-3:], "wall", done.get("wall_s"),
           "score", done.get("summary", {}).get("score"))
 PY
-tar czf $OUT/cells.tgz --exclude='checkpoint.prev' --exclude='.checkpoint.tmp-*' --exclude='.lock' --exclude='.worker.json' -C $W/cells . && ls -la $OUT
+tar cz --exclude='checkpoint.prev' --exclude='.checkpoint.tmp-*' --exclude='.lock' --exclude='.worker.json' -C $W/cells . \
+  | split -b 15m - $OUT/cells.tgz.part- && ls -la $OUT  # 4 pixel cells with checkpoints: ~60 MB
 stamp done

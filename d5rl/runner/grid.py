@@ -81,7 +81,8 @@ class Cell:
 
 def same_run(a: Cell, b: Cell) -> bool:
     """Whether two cells compute the same thing: equal but for ``--set`` values of the trainer's
-    execution-only settings (:data:`d5rl.training.config.EXECUTION_KEYS`: checkpoints, RAM, progress)."""
+    execution-only settings (:data:`d5rl.training.config.EXECUTION_KEYS`: checkpoints, RAM,
+    evaluation envs and processes, progress)."""
     from d5rl.training.config import EXECUTION_KEYS
 
     def what(c: Cell) -> dict:

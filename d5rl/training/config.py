@@ -34,8 +34,10 @@ def get_train_config() -> Config:
 
 
 # Settings that change how a run executes, never what it computes (a grid may resume or rerun a cell with
-# other values of these and it stays the same cell).
-EXECUTION_KEYS = ("checkpoint_interval", "dataset_in_memory_gb", "progress", "tensorboard")
+# other values of these and it stays the same cell).  Evaluation episodes reset with fixed seeds whatever the
+# number of environments or processes stepping them (tests/training/test_parts.py).
+EXECUTION_KEYS = ("checkpoint_interval", "dataset_in_memory_gb", "eval_envs", "eval_processes", "progress",
+                  "tensorboard")
 
 # What each training setting may be (checked before any work; see get_train_config for meanings).
 TRAIN_BOUNDS = {

@@ -71,11 +71,12 @@ def test_redefining_a_finished_cell_is_refused(finished_run):
 
 
 def test_execution_only_settings_keep_a_finished_cell(finished_run):
-    """Checkpoint spacing, RAM for the dataset and progress bars change how a cell runs, not what it computes:
+    """Checkpoint spacing, RAM for the dataset, evaluation envs / processes and progress bars change how a cell
+    runs, not what it computes:
     relaunching with them skips finished cells and keeps their record; any other setting is refused."""
     run_dir, _, _ = finished_run
     before = done_stamps(run_dir)
-    cells = grid(checkpoint_interval="7", dataset_in_memory_gb="4")
+    cells = grid(checkpoint_interval="7", dataset_in_memory_gb="4", eval_envs="2", eval_processes="true")
     result = run_bench(cells, run_dir, workers=1, progress=False)
     assert result.ok == [] and sorted(result.skipped) == sorted(before) and done_stamps(run_dir) == before
     assert all(json.loads((d / "cell.json").read_text())["overrides"] == {} for _, d in find_cells(run_dir))

@@ -51,13 +51,16 @@ def test_logger_grows_columns_and_truncates(tmp_path):
 
 
 def test_evaluation_does_not_depend_on_env_count():
+    # what lets eval_envs / eval_processes be execution-only settings (d5rl.training.config.EXECUTION_KEYS)
     from d5rl.training.evaluation import evaluate
     from tests.agents.helpers import make_agent
 
     agent = make_agent("bc")
     one = evaluate(agent, "toy-reach-v0", 4, seed=3, num_envs=1)
     four = evaluate(agent, "toy-reach-v0", 4, seed=3, num_envs=4)
+    two_processes = evaluate(agent, "toy-reach-v0", 4, seed=3, num_envs=2, processes=True)
     np.testing.assert_allclose(one["returns"], four["returns"], rtol=1e-6)
+    np.testing.assert_allclose(one["returns"], two_processes["returns"], rtol=1e-6)
     assert one["length"] == 25 and 0 <= one["success"] <= 1
 
 
