@@ -19,45 +19,34 @@ from pathlib import Path
 import numpy as np
 
 from d5rl.envs.a1.agents import POLICY_DIR, describe
-from d5rl.envs.a1.policy import SnapshotPolicy
+from d5rl.envs.a1.policy import SnapshotPolicy, run_episodes
 from d5rl.envs.a1.registration import SCORE_AGENTS, SCORES_FILE
 from d5rl.registry import get_spec, make_env
 
 
-def evaluate(task_id: str, policy: SnapshotPolicy, episodes: int, seed: int, deterministic: bool = True,
-             speeds: list | None = None) -> np.ndarray:
-    """Returns of ``episodes`` episodes; each episode's mean forward speed is appended to ``speeds``."""
+def evaluate(task_id: str, policy: SnapshotPolicy, episodes: int, seed: int, deterministic: bool = True) -> dict:
+    """``policy`` on the task: per-episode returns, mean forward speeds, lengths, falls (:func:`run_episodes`)."""
     env = make_env(task_id)
-    rng = np.random.default_rng(seed)
-    returns = []
-    for i in range(episodes):
-        obs, _ = env.reset(seed=seed * 100_003 + i)
-        total, done = 0.0, False
-        while not done:
-            obs, r, term, trunc, info = env.step(policy(obs, rng, deterministic=deterministic))
-            total += r
-            done = term or trunc
-        returns.append(total)
-        if speeds is not None:
-            speeds.append(info["episode_stats"]["forward_speed"])
-    env.close()
-    return np.asarray(returns)
+    try:
+        return run_episodes(env, policy, episodes, seed, deterministic)
+    finally:
+        env.close()
 
 
 def calibrate(task_id: str, episodes: int = 20, seed: int = 0) -> dict:
     get_spec(task_id)
-    random_returns = evaluate(task_id, SnapshotPolicy(None), episodes, seed, deterministic=False)
+    random_return = np.mean(evaluate(task_id, SnapshotPolicy(None), episodes, seed, deterministic=False)["returns"])
     best_agent, best = None, -np.inf
     per_agent, per_agent_speed = {}, {}
     for agent in SCORE_AGENTS[task_id]:
-        speeds: list[float] = []
-        ret = evaluate(task_id, SnapshotPolicy(POLICY_DIR / agent / "final.npz"), episodes, seed, speeds=speeds)
-        per_agent[agent] = round(float(ret.mean()), 3)
-        per_agent_speed[agent] = round(float(np.mean(speeds)), 3)
-        if ret.mean() > best:
-            best_agent, best = agent, float(ret.mean())
+        r = evaluate(task_id, SnapshotPolicy(POLICY_DIR / agent / "final.npz"), episodes, seed)
+        ret = float(np.mean(r["returns"]))
+        per_agent[agent] = round(ret, 3)
+        per_agent_speed[agent] = round(float(np.mean(r["speeds"])), 3)
+        if ret > best:
+            best_agent, best = agent, ret
     return {
-        "random": round(float(random_returns.mean()), 3),
+        "random": round(float(random_return), 3),
         "expert": round(best, 3),
         "expert_agent": best_agent,
         "expert_speed": per_agent_speed[best_agent],  # m/s, mean forward speed of its episodes

@@ -51,6 +51,31 @@ class SnapshotPolicy:
         return np.tanh(mu + np.exp(log_std) * rng.standard_normal(self.action_dim)).astype(np.float32)
 
 
+def run_episodes(env, policy: SnapshotPolicy, episodes: int, seed: int, deterministic: bool = True,
+                 max_steps: int | None = None) -> dict[str, list]:
+    """Roll ``policy`` on ``env`` (an A1 task or a data agent's training env) for ``episodes`` episodes.
+
+    Episode ``i`` resets with seed ``seed * 100_003 + i``; the policy's noise comes from
+    ``np.random.default_rng(seed)``.  An episode ends when the env terminates or truncates, or after
+    ``max_steps`` steps (for envs that do not truncate themselves).  Per episode: ``returns`` (the env's
+    reward), ``speeds`` (mean forward speed from the first step, m/s), ``lengths`` and ``falls`` (ended by
+    termination).
+    """
+    rng = np.random.default_rng(seed)
+    out: dict[str, list] = {"returns": [], "speeds": [], "lengths": [], "falls": []}
+    for i in range(episodes):
+        obs, _ = env.reset(seed=seed * 100_003 + i)
+        total, speeds, term, trunc = 0.0, [], False, False
+        while not (term or trunc) and (max_steps is None or len(speeds) < max_steps):
+            obs, r, term, trunc, info = env.step(policy(obs, rng, deterministic=deterministic))
+            total += r
+            speeds.append(info["forward_speed"])
+        for k, v in (("returns", total), ("speeds", float(np.mean(speeds))), ("lengths", len(speeds)),
+                     ("falls", bool(term))):
+            out[k].append(v)
+    return out
+
+
 def save_actor(params, path: Path) -> None:
     """Save a flax actor's params (float32) as a snapshot."""
     flat = {}

@@ -21,28 +21,17 @@ BAR = 0.05  # relative speed error allowed
 
 
 def rollouts(agent: str, episodes: int, seed: int, deterministic: bool, policy_dir: Path = POLICY_DIR) -> dict:
-    """Per-episode mean forward speed, length and whether it fell, for an agent's final policy."""
+    """Per-episode mean forward speed, length and whether it fell, for an agent's final policy on the env
+    it was trained on (:func:`d5rl.envs.a1.policy.run_episodes`)."""
     from d5rl.envs.a1.agents import AGENTS, make_env
-    from d5rl.envs.a1.policy import SnapshotPolicy
+    from d5rl.envs.a1.policy import SnapshotPolicy, run_episodes
 
-    spec = AGENTS[agent]
-    env, policy = make_env(agent), SnapshotPolicy(Path(policy_dir) / agent / "final.npz")
-    rng = np.random.default_rng(seed)
-    speeds, lengths, falls = [], [], []
-    for i in range(episodes):
-        obs, _ = env.reset(seed=seed * 100_003 + i)
-        v, fell = [], False
-        for _ in range(spec.episode_steps):
-            obs, _, term, _, info = env.step(policy(obs, rng, deterministic=deterministic))
-            v.append(info["forward_speed"])
-            if term:
-                fell = True
-                break
-        speeds.append(float(np.mean(v)))
-        lengths.append(len(v))
-        falls.append(fell)
-    env.close()
-    return {"speeds": speeds, "lengths": lengths, "falls": falls}
+    env = make_env(agent)
+    try:
+        return run_episodes(env, SnapshotPolicy(Path(policy_dir) / agent / "final.npz"), episodes, seed,
+                            deterministic, max_steps=AGENTS[agent].episode_steps)
+    finally:
+        env.close()
 
 
 def check(agent: str, episodes: int = 10, seed: int = 0, policy_dir: Path = POLICY_DIR) -> list[dict]:

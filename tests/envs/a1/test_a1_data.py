@@ -80,8 +80,8 @@ def test_shipped_agents_track_their_speed_without_falling(agent, low, high):
 
 @pytest.mark.slow
 def test_expert_beats_random_on_walk():
-    rnd = evaluate("a1-walk-v0", SnapshotPolicy(None), 3, 0, deterministic=False).mean()
-    best = max(evaluate("a1-walk-v0", SnapshotPolicy(POLICY_DIR / a / "final.npz"), 3, 0).mean()
+    rnd = np.mean(evaluate("a1-walk-v0", SnapshotPolicy(None), 3, 0, deterministic=False)["returns"])
+    best = max(np.mean(evaluate("a1-walk-v0", SnapshotPolicy(POLICY_DIR / a / "final.npz"), 3, 0)["returns"])
                for a in ("speed-0.5", "speed-0.8", "speed-1.0"))
     assert best > 2 * rnd
 
@@ -92,9 +92,8 @@ def test_calibration_records_the_experts_speed(monkeypatch, capsys):
     from d5rl.envs.a1 import calibrate as cal
     from d5rl.envs.a1.registration import _ref
 
-    speeds: list = []
-    ret = evaluate("a1-walk-v0", SnapshotPolicy(POLICY_DIR / "speed-0.8" / "final.npz"), 1, 0, speeds=speeds)
-    assert len(ret) == len(speeds) == 1 and 0.3 < speeds[0] < 1.2  # the 0.8 m/s agent walks
+    r = evaluate("a1-walk-v0", SnapshotPolicy(POLICY_DIR / "speed-0.8" / "final.npz"), 1, 0)
+    assert len(r["returns"]) == len(r["speeds"]) == 1 and 0.3 < r["speeds"][0] < 1.2  # the 0.8 m/s agent walks
     monkeypatch.setattr(cal, "SCORE_AGENTS", {"a1-walk-v0": ("speed-0.5", "speed-0.8")})
 
     class Named:  # stands for a snapshot: which agent it is
@@ -103,10 +102,8 @@ def test_calibration_records_the_experts_speed(monkeypatch, capsys):
 
     returns, agent_speeds = {"random": 100.0, "speed-0.5": 200.0, "speed-0.8": 300.0}, {"speed-0.5": 0.5, "speed-0.8": 0.7}
 
-    def fake_evaluate(task, policy, episodes, seed, deterministic=True, speeds=None):
-        if speeds is not None:
-            speeds.extend([agent_speeds[policy.name]] * episodes)
-        return np.full(episodes, returns[policy.name])
+    def fake_evaluate(task, policy, episodes, seed, deterministic=True):
+        return {"returns": [returns[policy.name]] * episodes, "speeds": [agent_speeds.get(policy.name, 0.0)] * episodes}
 
     monkeypatch.setattr(cal, "SnapshotPolicy", Named)
     monkeypatch.setattr(cal, "evaluate", fake_evaluate)
