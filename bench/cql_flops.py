@@ -22,22 +22,14 @@ from __future__ import annotations
 import argparse
 import os
 import sys
-import time
 
 import numpy as np
 
 sys.path.insert(0, os.path.dirname(os.path.dirname(os.path.abspath(__file__))))
 
+from bench.timing import rate  # noqa: E402
+
 OBS, ACT, B, H, N = 58, 12, 256, 256, 10
-
-
-def timed(fn, seconds):
-    fn()
-    n, t0 = 0, time.perf_counter()
-    while time.perf_counter() - t0 < seconds:
-        fn()
-        n += 1
-    return (time.perf_counter() - t0) / n
 
 
 def main() -> None:
@@ -75,7 +67,7 @@ def main() -> None:
         target = jax.lax.stop_gradient(mlp(w, xt).min(0))
         return jax.grad(lambda w: (mlp(w, x) ** 2).mean() + target.mean())(w)
 
-    t_floor = timed(lambda: jax.block_until_ready(floor(w, x, xt)), args.seconds)
+    t_floor = 1.0 / rate(lambda: jax.block_until_ready(floor(w, x, xt)), args.seconds)
     flops = 3 * 2 * 2 * rows * ((OBS + ACT) * H + H * H + H) + 2 * 2 * B * ((OBS + ACT) * H + H * H + H)
     print(f"floor (critic matmuls only): {t_floor * 1e3:7.1f} ms  ({flops / t_floor / 1e9:.1f} GFLOP/s)")
     for name in ("cql", "calql", "iql"):
@@ -87,7 +79,7 @@ def main() -> None:
             state["a"], m = state["a"].update(batch)
             jax.block_until_ready(m)
 
-        t = timed(step, args.seconds)
+        t = 1.0 / rate(step, args.seconds)
         print(f"{name:6s} update: {t * 1e3:7.1f} ms  ratio to the CQL floor {t / t_floor:.2f}")
 
 

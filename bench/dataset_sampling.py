@@ -29,14 +29,7 @@ import numpy as np
 
 sys.path.insert(0, os.path.dirname(os.path.dirname(os.path.abspath(__file__))))
 
-
-def rate(fn, seconds: float) -> float:
-    fn()
-    n, t0 = 0, time.perf_counter()
-    while time.perf_counter() - t0 < seconds:
-        fn()
-        n += 1
-    return n / (time.perf_counter() - t0)
+from bench.timing import rate  # noqa: E402
 
 
 def synthetic_episodes(n_eps=200, length=400, obs_dim=61, act_dim=12, seed=0):

@@ -15,9 +15,10 @@ import argparse
 import os
 import platform
 import sys
-import time
 
 sys.path.insert(0, os.path.dirname(os.path.dirname(os.path.abspath(__file__))))
+
+from bench.timing import rate  # noqa: E402
 
 import d5rl  # noqa: E402,F401  (sets MUJOCO_GL)
 import mujoco  # noqa: E402
@@ -27,15 +28,6 @@ from d5rl.envs.widowx import domain as wdom  # noqa: E402
 from d5rl.envs.widowx import model as wm  # noqa: E402
 from d5rl.envs.widowx.data import render_states  # noqa: E402
 from d5rl.envs.widowx.task import WidowXSortingEnv  # noqa: E402
-
-
-def rate(fn, seconds: float) -> float:
-    fn()
-    n, t0 = 0, time.perf_counter()
-    while time.perf_counter() - t0 < seconds:
-        fn()
-        n += 1
-    return n / (time.perf_counter() - t0)
 
 
 def stock_model() -> mujoco.MjModel:
