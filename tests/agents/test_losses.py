@@ -74,6 +74,13 @@ def critic(p, obs, act, ln=False):
     return np.stack(out)
 
 
+def deterministic_actor(params, obs):
+    """(B, act): tanh of the deterministic actor's output (TD3+BC, ReBRAC)."""
+    p = P(params)
+    h = mlp(p["MLP_0"], obs.astype(np.float64), len(p["MLP_0"]), activate_final=True)
+    return np.tanh(h @ p["Dense_0"]["kernel"] + p["Dense_0"]["bias"])
+
+
 def value(p, obs):
     p = P(p)["MLP_0"]
     return mlp(p, obs.astype(np.float64), len(p))[..., 0]
@@ -194,17 +201,12 @@ def test_td3bc_losses():
     agent, b = make("td3bc", alpha=2.5, discount=0.9, policy_noise=0.2, noise_clip=0.3), batch()
     key = jax.random.PRNGKey(5)
 
-    def pi(params, obs):
-        p = P(params)
-        h = mlp(p["MLP_0"], obs.astype(np.float64), len(p["MLP_0"]), activate_final=True)
-        return np.tanh(h @ p["Dense_0"]["kernel"] + p["Dense_0"]["bias"])
-
     noise = np.clip(0.2 * np.asarray(jax.random.normal(key, (B, ACT)), np.float64), -0.3, 0.3)
-    a_next = np.clip(pi(agent.target_actor_params, b["next_observations"]) + noise, -1, 1)
+    a_next = np.clip(deterministic_actor(agent.target_actor_params, b["next_observations"]) + noise, -1, 1)
     target = b["rewards"] + 0.9 * b["masks"] * critic(agent.target_critic_params, b["next_observations"], a_next).min(0)
     qs = critic(agent.critic.params, b["observations"], b["actions"])
     close(agent.critic_loss(agent.critic.params, b, key)[0], ((qs - target) ** 2).mean(1).sum())
-    a = pi(agent.actor.params, b["observations"])
+    a = deterministic_actor(agent.actor.params, b["observations"])
     q1 = critic(agent.critic.params, b["observations"], a)[0]
     lam = 2.5 / np.abs(q1).mean()
     close(agent.actor_loss(agent.actor.params, b)[0], -lam * q1.mean() + ((a - b["actions"]) ** 2).mean())
@@ -216,19 +218,14 @@ def test_rebrac_losses_penalize_both_sides():
     b, key = batch(), jax.random.PRNGKey(8)
     b["next_actions"] = np.random.default_rng(3).uniform(-0.9, 0.9, (B, ACT)).astype(np.float32)
 
-    def pi(params, obs):
-        p = P(params)
-        h = mlp(p["MLP_0"], obs.astype(np.float64), len(p["MLP_0"]), activate_final=True)
-        return np.tanh(h @ p["Dense_0"]["kernel"] + p["Dense_0"]["bias"])
-
     noise = np.clip(0.2 * np.asarray(jax.random.normal(key, (B, ACT)), np.float64), -0.3, 0.3)
-    a_next = np.clip(pi(agent.target_actor_params, b["next_observations"]) + noise, -1, 1)
+    a_next = np.clip(deterministic_actor(agent.target_actor_params, b["next_observations"]) + noise, -1, 1)
     penalty = ((a_next - b["next_actions"]) ** 2).sum(-1)
     next_q = critic(agent.target_critic_params, b["next_observations"], a_next, ln=True).min(0)
     target = b["rewards"] + 0.9 * b["masks"] * (next_q - 0.7 * penalty)
     qs = critic(agent.critic.params, b["observations"], b["actions"], ln=True)
     close(agent.critic_loss(agent.critic.params, b, key)[0], ((qs - target) ** 2).mean(1).sum())
-    a = pi(agent.actor.params, b["observations"])
+    a = deterministic_actor(agent.actor.params, b["observations"])
     q = critic(agent.critic.params, b["observations"], a, ln=True).min(0)
     want = (0.3 * ((a - b["actions"]) ** 2).sum(-1) - q / np.abs(q).mean()).mean()
     close(agent.actor_loss(agent.actor.params, b)[0], want)
