@@ -38,9 +38,10 @@ def speed_histogram(columns: dict[str, np.ndarray], lo=-0.2, hi=1.2, width=0.1) 
 def describe(task_ids: tuple[str, ...]) -> str:
     ds = load_dataset(task_ids[0], generate=False, progress=False)
     meta = ds.episode_meta
+    last_steps = np.asarray(ds.episode_starts) + np.asarray(ds.episode_lengths) - 1  # each episode's last transition
     out = [f"### `{ds.metadata['dataset']}` (used by {', '.join(f'`{t}`' for t in task_ids)})", ""]
     out.append(f"- episodes: {ds.num_episodes:,}, transitions: {ds.num_transitions:,}, "
-               f"terminated by a fall: {100 * np.mean([bool(ds.terminals[s + n - 1]) for s, n in zip(ds.episode_starts, ds.episode_lengths)]):.1f}% of episodes")
+               f"terminated by a fall: {100 * np.mean(np.asarray(ds.terminals[last_steps], bool)):.1f}% of episodes")
     speed = np.asarray(ds.arrays["infos/forward_speed"])
     episode_speed = np.bincount(ds.transition_episode, weights=speed) / ds.episode_lengths
     agent = np.array([m["agent"] for m in meta])
