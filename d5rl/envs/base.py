@@ -21,6 +21,12 @@ from d5rl.rendering import make_renderer
 STATE_SPEC = mujoco.mjtState.mjSTATE_INTEGRATION
 
 
+def qpos_of_states(states: np.ndarray, nq: int) -> np.ndarray:
+    """The first ``nq`` joint positions of stored states (rows of :data:`STATE_SPEC`: time, then qpos, ...),
+    read without a model."""
+    return np.asarray(states)[:, 1 : 1 + nq]
+
+
 class ResetNeededError(D5RLError, gym.error.ResetNeeded):
     """``step`` was called before the first ``reset``."""
 

@@ -60,7 +60,13 @@ FRAME_SKIP = 40  # 40 x 2 ms = 0.08 s control step
 ACTION_SCALE = 2.0  # rad/s (m/s for fingers) at |action| = 1
 CAMERAS = ("overview", "wrist")
 OBS_MODES = ("pixels", "state")
+JOINTS = km.NUM_ROBOT_QPOS + km.NUM_OBJECT_QPOS  # the state observation: 9 robot and 21 object joint positions
 SUBTASK_STAT_KEYS = tuple(f"subtask/{n.replace(' ', '_')}" for n in SUBTASK_NAMES)  # info["episode_stats"] keys
+
+
+def state_observations(qpos: np.ndarray) -> np.ndarray:
+    """The ``obs_mode="state"`` observation of each row of ``qpos`` (T, >= 30): float32 (T, 30)."""
+    return np.asarray(qpos)[:, :JOINTS].astype(np.float32)
 
 
 class KitchenEnv(MujocoEnv):
@@ -110,8 +116,7 @@ class KitchenEnv(MujocoEnv):
                 {**{f"pixels/{c}": img for c in self.cameras}, "proprio": proprio}
             )
         else:
-            n = km.NUM_ROBOT_QPOS + km.NUM_OBJECT_QPOS
-            self.observation_space = spaces.Box(-np.inf, np.inf, shape=(n,), dtype=np.float32)
+            self.observation_space = spaces.Box(-np.inf, np.inf, shape=(JOINTS,), dtype=np.float32)
 
     # --- observations -------------------------------------------------------------------------
     def render_cameras(self, size: int | None = None, cameras: Sequence[str] | None = None) -> dict[str, np.ndarray]:
@@ -122,7 +127,7 @@ class KitchenEnv(MujocoEnv):
     def _get_obs(self):
         qpos = self.data.qpos
         if self.obs_mode == "state":
-            return qpos[: km.NUM_ROBOT_QPOS + km.NUM_OBJECT_QPOS].astype(np.float32)
+            return state_observations(qpos[None])[0]
         obs = {f"pixels/{c}": img for c, img in self.render_cameras().items()}
         obs["proprio"] = qpos[: km.NUM_ROBOT_QPOS].astype(np.float32)
         return obs

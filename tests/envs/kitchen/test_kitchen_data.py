@@ -8,8 +8,9 @@ import pytest
 
 import d5rl
 from d5rl.datasets.loading import load_dataset
+from d5rl.envs.base import qpos_of_states
 from d5rl.envs.kitchen import data as kdata
-from d5rl.envs.kitchen.data import COMBINATIONS, KitchenStandardGenerator, relabel
+from d5rl.envs.kitchen.data import COMBINATIONS, KitchenStandardGenerator, relabel, state_episode
 from d5rl.envs.kitchen.subtasks import MIXED, PARTIAL, SUBTASK_NAMES, CompletionChecker
 from d5rl.envs.kitchen.task import KitchenEnv
 
@@ -41,11 +42,16 @@ def test_dataset_round_trip_relabel_and_renders(monkeypatch):
     # stored completion flags agree with the stored states (qpos follows the time entry)
     env = KitchenEnv(obs_mode="state")
     checker = CompletionChecker(env.model)
-    step_done = checker.completed(np.asarray(ds.arrays["states"])[:, 1 : 1 + env.model.nq])
+    step_done = checker.completed(qpos_of_states(ds.arrays["states"], env.model.nq))
     next_rows = ds.transition_step + 1
     np.testing.assert_array_equal(step_done[next_rows], ds.arrays["infos/completed"])
     np.testing.assert_array_equal(np.asarray(ds.arrays["observations/proprio"]),
                                   np.asarray(ds.arrays["states"])[:, 1:10].astype(np.float32))
+    # the -state tasks' observations, read from the stored states without simulating, are the env's
+    observed = state_episode({"states": ds.arrays["states"]}, {})["observations"]
+    for row in (0, 60, len(observed) - 1):
+        env.set_state(ds.arrays["states"][row])
+        np.testing.assert_array_equal(observed[row], env._get_obs())
     # each task counts its own subtasks
     done = ds.arrays["infos/completed"]
     for task, tasks in (("kitchen-standard-mixed-v0", MIXED), ("kitchen-standard-partial-v0", PARTIAL)):

@@ -30,6 +30,16 @@ def test_episode_deterministic_and_rerender_matches_env(gen):
         assert np.array_equal(frames[f"observations/pixels/{c}"][1], env.render_camera_image(c, 64, 64))
     ds = Dataset.from_episodes([a])
     assert ds.num_transitions == 500 and ds.episode_meta[0]["domain"] == a.meta["domain"]
+    # the -state tasks' cached observations (read from the stored states, no simulation) == the env's
+    from d5rl.envs.kitchen.data import state_episode
+
+    cached = state_episode({"states": a.arrays["states"]}, a.meta)["observations"]
+    state_env = RandomizedKitchenEnv(obs_mode="state", domain=Domain.from_json(a.meta["domain"]))
+    state_env.reset(seed=0)
+    assert cached.shape == (501,) + state_env.observation_space.shape and cached.dtype == np.float32
+    for t in (0, 250, 500):
+        state_env.set_state(a.arrays["states"][t])
+        np.testing.assert_array_equal(cached[t], state_env._get_obs())
 
 
 def test_play_never_contains_partial_set_and_sizes_are_uniform():

@@ -151,19 +151,6 @@ def render_episode(arrays: dict, meta: dict, cameras: Sequence[str] = DEFAULT_CA
     return {f"observations/pixels/{c}": v for c, v in out.items()}
 
 
-def state_episode(arrays: dict, meta: dict) -> dict:
-    """``observations``: the ``obs_mode="state"`` observation of every stored state, in its domain."""
-    from d5rl.envs.kitchen.data import observe_states
-    from d5rl.envs.kitchen.randomized.domain import Domain
-    from d5rl.envs.kitchen.randomized.task import RandomizedKitchenEnv
-
-    if "state" not in _RENDER_ENV:
-        _RENDER_ENV["state"] = RandomizedKitchenEnv(obs_mode="state")
-    env = _RENDER_ENV["state"]
-    env.set_domain(Domain.from_json(meta["domain"]))
-    return {"observations": observe_states(env, arrays["states"])}
-
-
 def renders(spec, root, manifest, *, episodes: int, workers: int | None = None, progress: bool = True,
             cameras: Sequence[str] = DEFAULT_CAMERAS, size: int = 128, render: bool = True) -> list:
     """``DatasetSpec.derived``: camera frames of the stored states in their domains (cached); for a
@@ -173,7 +160,7 @@ def renders(spec, root, manifest, *, episodes: int, workers: int | None = None, 
     from d5rl.datasets.render_cache import ensure_render_cache
 
     if spec is not None and spec.observation == "state":
-        return [ensure_render_cache(root, manifest, "d5rl.envs.kitchen.randomized.data:state_episode", {},
+        return [ensure_render_cache(root, manifest, "d5rl.envs.kitchen.data:state_episode", {},
                                     name="state", episodes=episodes, workers=workers, progress=progress)]
 
     return [ensure_render_cache(root, manifest, "d5rl.envs.kitchen.randomized.data:render_episode",
