@@ -50,3 +50,57 @@ def test_python_blocks_run(index, tmp_path):
     proc = subprocess.run([sys.executable, "-c", code], cwd=tmp_path, capture_output=True, text=True, timeout=600,
                           env={**__import__("os").environ, "D5RL_HOME": str(env_home), "PYTHONPATH": str(ROOT)})
     assert proc.returncode == 0, proc.stderr[-3000:]
+
+
+# --- published results: the README's result tables are copies of the reports' -------------------------------
+def _tables(text: str) -> list[tuple[int, list[str], list[list[str]]]]:
+    """Every markdown table of ``text``: (offset of its header line, header cells, body rows)."""
+    out = []
+    for m in re.finditer(r"^(\|.*\|)\n\|[-:| ]+\|\n((?:\|.*\|\n?)*)", text, flags=re.M):
+        cells = lambda line: [c.strip() for c in line.strip().strip("|").split("|")]  # noqa: E731
+        out.append((m.start(), cells(m.group(1)), [cells(r) for r in m.group(2).splitlines() if r.strip()]))
+    return out
+
+
+def _task_of(row: list[str]) -> str | None:
+    for cell in row[:2]:
+        m = re.search(r"[a-z0-9]+(?:-[a-z0-9]+)*-v\d+", cell)
+        if m:
+            return m.group(0)
+    return None
+
+
+def _entries(header, rows) -> dict[tuple[str, str], str]:
+    """(task, method label) -> the table's entry, for the columns named after a method."""
+    from d5rl.runner.report import METHODS
+
+    labels = set(METHODS.values())
+    return {(_task_of(row), col): cell for row in rows for col, cell in zip(header, row)
+            if col in labels and _task_of(row)}
+
+
+def test_readme_result_tables_match_their_reports():
+    """Each README table of scores is the entries of the grid report it follows (the last
+    ``docs/results/<grid>/`` named above it), number for number: a hand-copied table cannot drift from
+    ``d5rl report``'s output.  A README entry may add a remark after the number (``(n=1)``)."""
+    from d5rl.runner.report import METHODS
+
+    checked = 0
+    for start, header, rows in _tables(README):
+        if not set(header) & set(METHODS.values()):
+            continue
+        grids = re.findall(r"docs/results/([\w-]+)/", README[:start])
+        assert grids, f"the README's table with columns {header} follows no docs/results/<grid>/ link"
+        report = ROOT / "docs/results" / grids[-1]
+        ours = {}
+        for path in sorted(report.glob("*_vs_paper.md")):
+            for _, h, r in _tables(path.read_text()):
+                ours.update(_entries(h, r))
+        mine = _entries(header, rows)
+        assert mine, f"no (task, method) entries read from the README's table {header}"
+        for key, cell in mine.items():
+            assert key in ours, f"README ({grids[-1]}): {key} is not in {report}/*_vs_paper.md"
+            assert cell == ours[key] or cell.startswith(ours[key] + " "), \
+                f"README ({grids[-1]}) {key}: {cell!r}, its report says {ours[key]!r}"
+            checked += 1
+    assert checked >= 50, f"only {checked} README entries were checked against reports"
