@@ -9,12 +9,12 @@
 # in .git/info/exclude, which does not travel, and the second call found it gone), so a second call skips what
 # is done and resumes unfinished cells from their checkpoints.  LOCAL=1 skips the machine setup (a dry run
 # here; CELLS and STEPS make it small).
-# The machine needs, in the checkout (git-ignored, prepared where pip works): .gl/ (libEGL/libGL .debs),
-# .whl/ (cp312 wheels of mujoco, mujoco-core, gymnasium, zstandard, xacro, flax, optax, ...), .assets/
-# (the extracted robot models, D5RL_ASSETS) and .dcache/<dataset>.json (this
-# machine's manifests, to compare the regenerated data).  The working tree travels with them (64 MiB in all):
-# move experiments/a1-agents/ and docs/results/table1-state/videos/ (57 MB, not used there) out of the checkout
-# for the call and put them back after it.  Cells come back in $OUT/cells.tgz, with
+# The machine needs, in the checkout (git-ignored): .gl/ (libEGL/libGL .debs), .whl/ (cp312 wheels at the lock's
+# versions), .assets/ (the extracted robot models, D5RL_ASSETS): `bash scripts/gpu_prepare.sh kitchen` (or
+# `kitchen wx`) makes them here and prints what will travel; optionally .dcache/<dataset>.json (this machine's
+# manifests, to compare the regenerated data).  The working tree travels with them (64 MiB in all): move
+# experiments/a1-agents/ and docs/results/table1-state/videos/ (57 MB, not used there) out of the checkout for
+# the call and put them back after it.  Cells come back in $OUT/cells.tgz, with
 # their final checkpoints (for the report's rollout GIFs, or to evaluate again where a lease ended mid-evaluation),
 # split into parts under the device's 16 MiB a file (cat cells.tgz.part-* | tar xz).
 T0=$(date +%s); BUDGET=${BUDGET:-540}; W=$PWD/.dwork
