@@ -17,9 +17,10 @@ WHEELS="mujoco mujoco-core gymnasium Farama-Notifications zstandard xacro flax o
 rm -rf .whl && mkdir -p .whl
 for name in $WHEELS; do
   pin=$(grep -i "^${name}==" "$LOCK") || { echo "error: $name is not pinned in $LOCK" >&2; exit 2; }
-  python3 -m pip download -q --no-deps --only-binary=:all: --python-version 3.12 --implementation cp \
+  out=$(python3 -m pip download -q --no-deps --only-binary=:all: --python-version 3.12 --implementation cp \
     --platform manylinux_2_28_x86_64 --platform manylinux_2_27_x86_64 --platform manylinux_2_17_x86_64 \
-    --platform manylinux2014_x86_64 --platform any -d .whl "$pin" 2>&1 | grep -v "^WARNING: Location" || true
+    --platform manylinux2014_x86_64 --platform any -d .whl "$pin" 2>&1) \
+    || { echo "$out" | grep -v "^WARNING: Location" >&2; echo "error: pip could not download $pin" >&2; exit 2; }
 done
 rm -rf .gl && mkdir -p .gl /tmp/amd64/partial
 o='-oAPT::Architecture=amd64 -oAPT::Architectures=amd64 -oDir::State::Lists=/tmp/amd64'

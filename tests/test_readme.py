@@ -75,8 +75,12 @@ def _entries(header, rows) -> dict[tuple[str, str], str]:
     from d5rl.runner.report import METHODS
 
     labels = set(METHODS.values())
-    return {(_task_of(row), col): cell for row in rows for col, cell in zip(header, row)
-            if col in labels and _task_of(row)}
+    out = {}
+    for row in rows:
+        task = _task_of(row)
+        if task:
+            out.update({(task, col): cell for col, cell in zip(header, row) if col in labels})
+    return out
 
 
 def test_readme_result_tables_match_their_reports():
