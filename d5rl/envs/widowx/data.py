@@ -55,7 +55,8 @@ class WidowXScriptedGenerator:
 
     # 2: objects dropped in random orientations and settled; grasps across the narrow side seen from above.
     # 3: tabletop room scene and its variation; objects scaled to be graspable on any side; sorting plans.
-    version = "wx-scripted-3"
+    # 4: the room's floor, walls and table legs collide (an object off the table lands on the floor).
+    version = "wx-scripted-4"
 
     def __init__(self, task_id: str = "", mode: str = "sorting", p_wrong: float = 0.3, p_one: float = 0.0,
                  p_miss: float = 0.0, episode_steps: int | None = None, noise: float = 0.15):

@@ -18,7 +18,7 @@ _SCORE_DEFINITION = (
 
 SORTING_DATA = DatasetSpec(
     name="wx-sorting",
-    version=2,
+    version=3,
     generator=_GENERATOR,
     num_episodes=2000,
     episodes_per_shard=25,
@@ -30,7 +30,7 @@ SORTING_DATA = DatasetSpec(
 )
 PICKPLACE_DATA = DatasetSpec(
     name="wx-pickplace",
-    version=2,
+    version=3,
     generator=_GENERATOR,
     num_episodes=2000,
     episodes_per_shard=50,

@@ -125,16 +125,16 @@ def add_tabletop(spec: mujoco.MjSpec) -> None:
     """Room, table, bins, lights and the side camera (the robot's base stands on the table at the origin)."""
     _add_textures(spec)
     wb = spec.worldbody
-    visual = dict(contype=0, conaffinity=0)
+    # The room holds what falls off the table: floor, walls and legs collide (dataset v3; before, they were
+    # visual only and a toy thrown off the table fell forever).
     floor_z = -TABLE_HEIGHT
     wb.add_geom(name="floor", type=mujoco.mjtGeom.mjGEOM_PLANE, size=[3, 3, 0.1], pos=[0, 0, floor_z],
-                material="floor", **visual)
+                material="floor")
     mid_z = floor_z + WALL_HEIGHT / 2
-    box(wb, "wall_back", (0.01, SIDE_WALL_Y, WALL_HEIGHT / 2), (BACK_WALL_X - 0.01, 0, mid_z), material="wall",
-         **visual)
+    box(wb, "wall_back", (0.01, SIDE_WALL_Y, WALL_HEIGHT / 2), (BACK_WALL_X - 0.01, 0, mid_z), material="wall")
     for sign, side in ((1, "left"), (-1, "right")):
         box(wb, f"wall_{side}", (1.5, 0.01, WALL_HEIGHT / 2), (BACK_WALL_X + 1.5, sign * (SIDE_WALL_Y + 0.01), mid_z),
-             material="wall", **visual)
+             material="wall")
     hx, hy = TABLE_HALF
     box(wb, "table", (hx, hy, TABLE_THICKNESS / 2), (TABLE_CENTER_X, 0.0, -TABLE_THICKNESS / 2), material="table",
          friction=[0.8, 0.01, 0.001], condim=3)
@@ -143,7 +143,7 @@ def add_tabletop(spec: mujoco.MjSpec) -> None:
         for sy in (-1, 1):
             pos = (TABLE_CENTER_X + sx * (hx - 0.06), sy * (hy - 0.06), floor_z + leg_h)
             box(wb, f"table_leg_{'f' if sx > 0 else 'b'}{'l' if sy > 0 else 'r'}", (LEG_HALF, LEG_HALF, leg_h), pos,
-                 material="table_leg", **visual)
+                 material="table_leg")
     for k, c in BIN_CENTERS.items():
         _add_bin(spec, k, c)
     wb.add_light(name="key", pos=list(KEY_LIGHT_POS), dir=[0.0, 0.4, -1.0], diffuse=[0.6, 0.6, 0.6],

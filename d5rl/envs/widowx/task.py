@@ -52,7 +52,8 @@ Version history
     v0: initial release.  Revised in place with the datasets (dataset versions in
     CHANGELOG.md): dataset v1 dropped the objects in random orientations and let them
     settle; dataset v2 added the tabletop room, wall textures, light colours and
-    ambient light to the per-episode variation, and rescaled the toys and the boot.
+    ambient light to the per-episode variation, and rescaled the toys and the boot; dataset v3 made
+    the room's floor, walls and table legs collide (before, an object thrown off the table fell forever).
 """
 
 from __future__ import annotations

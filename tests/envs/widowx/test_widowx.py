@@ -193,6 +193,20 @@ def test_object_on_table_does_not_count(env):
     assert not any(info["episode_stats"].values())
 
 
+
+def test_object_off_the_table_lands_on_the_floor(env):
+    """The room's floor collides: a toy that leaves the table comes to rest on it (dataset v2 and older: the
+    floor was visual only and one toy in each WidowX dataset fell to z = -127 m)."""
+    env.reset(seed=0, options={"domain": _domain()})
+    beyond = tabletop.TABLE_CENTER_X + tabletop.TABLE_HALF[0] + 0.15  # in front of the table's edge
+    env.index.set_object_pose(env.data, "duck", [beyond, 0.0, 0.05], wscene.yaw_quat(0.0))
+    for _ in range(40):  # 4 s: the fall (0.4 s) and settling
+        env.step(np.zeros(5, np.float32))
+    z = wscene.object_center(env.model, env.data, "duck")[2]
+    floor = -tabletop.TABLE_HEIGHT
+    assert floor < z < floor + 0.1, f"the toy's centre is at z = {z:.3f} m, the floor at {floor} m"
+    assert env.index.object_speed(env.data, "duck") < 0.01  # at rest
+
 # --- scripted policy ---------------------------------------------------------------------
 def test_scripted_grasp_success_band():
     """Objects lie on any side; the scripted pick-and-place still works for most of them
