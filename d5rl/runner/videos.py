@@ -20,7 +20,8 @@ GIF_SIZE = (120, 160)  # (height, width) of the frames
 EVERY = 2  # keep every 2nd step: ~10 frames per second of simulated time at 20 Hz control
 
 
-def _candidates(results, task: str) -> list:
+def ranked_cells(results, task: str) -> list:
+    """The finished, current cells of ``task`` with a final score, best first (the GIF's choice)."""
     from d5rl.runner.report import METHODS
 
     order = list(METHODS)
@@ -91,7 +92,7 @@ def write_rollout_gifs(results, out_dir: Path, log=print) -> dict[str, str]:
     videos = Path(out_dir) / "videos"
     captions = read_captions(videos)
     for task in sorted({r.task for r in results}):
-        for cell in _candidates(results, task):
+        for cell in ranked_cells(results, task):
             if not (cell.directory / "checkpoint").exists():
                 continue
             frames, fps, seed, scores = typical_rollout(cell.directory, task)

@@ -1,22 +1,27 @@
 #!/bin/bash
-# Pixel Table 1 cells on a bare GPU machine with no network (the README's GPU runs, issue 21):
-#   STEPS=3000 BUDGET=545 bash scripts/gpu_pixels.sh   # the cells still missing: randomized kitchen, 100 episodes
-#   CELLS="wx-sorting-v0:bc,iql:16:4 kitchen-standard-mixed-v0:iql:12:2" BUDGET=560 bash scripts/gpu_pixels.sh
+# Table 1 cells on a bare GPU machine with no network (the README's GPU runs, issues 20 and 21): pixel cells,
+# and state cells whose agents are too slow for a 2-core CPU (CQL, CalQL, FQL: 13-19 updates/s there):
+#   STEPS=3000 BUDGET=545 bash scripts/gpu_bench.sh   # the randomized kitchen from its cameras, 100 episodes
+#   CELLS="wx-sorting-v0:bc,iql:16:4 kitchen-standard-mixed-v0:iql:12:2" BUDGET=560 bash scripts/gpu_bench.sh
+#   SEEDS=0-2 STEPS=10000 CELLS="wx-sorting-state-v0:$A:16:8 wx-sorting-pickplacedata-state-v0:$A:16:8" \
+#     BUDGET=540 bash scripts/gpu_bench.sh   # A=fql,cql,calql,idql,ddpm_bc,rebrac,iql,td3bc,bc: WidowX from state
 # CELLS lists TASK:ALGOS:GENERATE_WORKERS:BENCH_WORKERS[:SET,SET...]; each entry generates its data (one
-# entry at a time) and then runs its cells beside the others (the second line: the README's wx-sorting rows).
-# Call it again on the same (still warm) machine to go on: packages, data and cells live in .dwork/ of the
-# checkout, which .gitignore names so that the device keeps it between calls (on 2026-11-26 it was ignored only
-# in .git/info/exclude, which does not travel, and the second call found it gone), so a second call skips what
-# is done and resumes unfinished cells from their checkpoints.  LOCAL=1 skips the machine setup (a dry run
+# entry at a time; a `-state` task's without frames) and then runs its cells beside the others.  SEEDS (0-1)
+# and STEPS (5000) are the grid's seeds and offline steps; pixel cells also get the execution-only settings
+# below.  Call it again on the same (still warm) machine to go on: packages, data and cells live in .dwork/ of
+# the checkout, which .gitignore names so that the device keeps it between calls (on 2026-11-26 it was ignored
+# only in .git/info/exclude, which does not travel, and the second call found it gone), so a second call skips
+# what is done and resumes unfinished cells from their checkpoints.  LOCAL=1 skips the machine setup (a dry run
 # here; CELLS and STEPS make it small).
 # The machine needs, in the checkout (git-ignored): .gl/ (libEGL/libGL .debs), .whl/ (cp312 wheels at the lock's
 # versions), .assets/ (the extracted robot models, D5RL_ASSETS): `bash scripts/gpu_prepare.sh kitchen` (or
-# `kitchen wx`) makes them here and prints what will travel; optionally .dcache/<dataset>.json (this machine's
-# manifests, to compare the regenerated data).  The working tree travels with them (64 MiB in all): move
-# experiments/a1-agents/ and docs/results/table1-state/videos/ (57 MB, not used there) out of the checkout for
-# the call and put them back after it.  Cells come back in $OUT/cells.tgz, with
-# their final checkpoints (for the report's rollout GIFs, or to evaluate again where a lease ended mid-evaluation),
-# split into parts under the device's 16 MiB a file (cat cells.tgz.part-* | tar xz).
+# `kitchen wx`, or `wx`) makes them here and prints what will travel; optionally .dcache/<dataset>.json (this
+# machine's manifests, to compare the regenerated data).  The working tree travels with them (64 MiB in all):
+# move experiments/a1-agents/ and docs/results/table1-state/videos/ (57 MB, not used there) out of the checkout
+# for the call and put them back after it.  Cells come back in $OUT/cells.tgz (split into parts under the
+# device's 16 MiB a file: cat cells.tgz.part-* | tar xz) with every result file, and the checkpoints of each
+# task's best finished cell (for the report's rollout GIFs) and of unfinished cells (to resume or evaluate them
+# elsewhere) while they fit in 56 MiB.
 T0=$(date +%s); BUDGET=${BUDGET:-540}; W=$PWD/.dwork
 left() { echo $(( BUDGET - ($(date +%s) - T0) )); }
 stamp() { echo "[$(( $(date +%s) - T0 ))s] $*"; }
@@ -37,15 +42,16 @@ CELLS=${CELLS:-"kitchen-randomized-mixed-v0:bc,iql:16:4:dataset_episodes=100,fin
 # batch; checkpoint_interval: a call cut short loses at most 1,000 steps a cell; eval_processes: the final
 # evaluation steps its 5 environments in 5 processes (one process could not finish 50 episodes of the randomized
 # kitchen, 500 steps and 3 cameras each, in 260 s while two IQL cells trained beside it).  All are execution-only.
-B="--seeds 0-1 --offline-steps ${STEPS:-5000} --no-report --no-progress --set dataset_in_memory_gb=16 --set checkpoint_interval=1000"
-B="$B --set eval_processes=true"
+B="--seeds ${SEEDS:-0-1} --offline-steps ${STEPS:-5000} --no-report --no-progress --set checkpoint_interval=1000"
+PIXELS="--set dataset_in_memory_gb=16 --set eval_processes=true"
 cli() { local t=$1; shift; timeout $t python3 -m d5rl.cli "$@"; }
 gen() { local s=$(date +%s); cli $(( $(left) - 20 )) generate "$@" 2>&1 | tr '\r' '\n' | grep -v "it/s\|ep/s" | tail -2
         stamp "generate+render $*: $(( $(date +%s) - s )) s"; }
 entry() {  # TASK ALGOS GENERATE_WORKERS BENCH_WORKERS [SET,SET...]: its data (one entry at a time), then its cells
-  local sets="" prefix=""
+  local sets="$PIXELS" prefix="" render=""
+  [[ $1 == *-state-v* ]] && { sets=""; render="--no-render"; }  # state cells: no frames to hold or render
   for kv in ${5//,/ }; do sets="$sets --set $kv"; [[ $kv == dataset_episodes=* ]] && prefix="--episodes ${kv#*=}"; done
-  ( flock 9; gen $1 --workers $3 $prefix ) 9>$W/generate.lock  # cells on a prefix of the data need only that prefix
+  ( flock 9; gen $1 --workers $3 $prefix $render ) 9>$W/generate.lock  # cells on a prefix of the data need only that prefix
   cli $(( $(left) - 25 )) bench --tasks $1 --algos ${2//,/ } $B $sets --workers $4 --out $W/cells/$1 > $W/bench-$1.log 2>&1
 }
 for e in $CELLS; do IFS=: read -r t a gw bw sets <<< "$e"; entry "$t" "$a" "$gw" "$bw" "$sets" & sleep 1; done
@@ -66,6 +72,27 @@ for d in sorted(glob.glob(sys.argv[1] + "/*/*/*/seed*")):
     print(d, "steps", rows[-1].get("step") if rows else None, "ups", ups[-3:], "wall", done.get("wall_s"),
           "score", done.get("summary", {}).get("score"))
 PY
-tar cz --exclude='checkpoint.prev' --exclude='.checkpoint.tmp-*' --exclude='.lock' --exclude='.worker.json' -C $W/cells . \
-  | split -b 15m - $OUT/cells.tgz.part- && ls -la $OUT  # 4 pixel cells with checkpoints: ~60 MB
+python3 - "$W/cells" > $W/archive.txt <<'PY'  # what comes back: every result file, then checkpoints while they fit
+import os, sys
+from pathlib import Path
+from d5rl.runner.report import collect
+from d5rl.runner.videos import ranked_cells
+root, budget = Path(sys.argv[1]), 56 << 20
+skip = ("checkpoint", "checkpoint.prev", ".lock", ".worker.json")
+files = [p for p in root.rglob("*") if p.is_file() and not any(
+    part in skip or part.startswith(".checkpoint.tmp-") for part in p.relative_to(root).parts)]
+results = [r for entry in sorted(root.iterdir()) if entry.is_dir() for r in collect(entry)]
+best = [c[0].directory for t in sorted({r.task for r in results}) if (c := ranked_cells(results, t))]
+todo = [r.directory for r in results if not r.done]
+size = sum(p.stat().st_size for p in files)
+for d in best + todo:
+    ckpt = [p for p in (d / "checkpoint").rglob("*") if p.is_file()]
+    extra = sum(p.stat().st_size for p in ckpt)
+    if ckpt and size + extra <= budget:
+        files += ckpt; size += extra
+print("\n".join(str(p.relative_to(root)) for p in files))
+print(f"archive: {size / 2**20:.1f} MiB, checkpoints of {len(best)} best and {len(todo)} unfinished cells considered",
+      file=sys.stderr)
+PY
+tar cz -C $W/cells -T $W/archive.txt | split -b 15m - $OUT/cells.tgz.part- && ls -la $OUT
 stamp done
