@@ -3,8 +3,9 @@
 # and state cells whose agents are too slow for a 2-core CPU (CQL, CalQL, FQL: 13-19 updates/s there):
 #   STEPS=3000 BUDGET=545 bash scripts/gpu_bench.sh   # the randomized kitchen from its cameras, 100 episodes
 #   CELLS="wx-sorting-v0:bc,iql:16:4 kitchen-standard-mixed-v0:iql:12:2" BUDGET=560 bash scripts/gpu_bench.sh
+#   A=fql,cql,calql,idql,ddpm_bc,rebrac,iql,td3bc,bc   # WidowX from state (README, "Table 1 from state")
 #   SEEDS=0-2 STEPS=10000 CELLS="wx-sorting-state-v0:$A:16:8 wx-sorting-pickplacedata-state-v0:$A:16:8" \
-#     BUDGET=540 bash scripts/gpu_bench.sh   # A=fql,cql,calql,idql,ddpm_bc,rebrac,iql,td3bc,bc: WidowX from state
+#     BUDGET=520 bash scripts/gpu_bench.sh
 # CELLS lists TASK:ALGOS:GENERATE_WORKERS:BENCH_WORKERS[:SET,SET...]; each entry generates its data (one
 # entry at a time; a `-state` task's without frames) and then runs its cells beside the others.  SEEDS (0-1)
 # and STEPS (5000) are the grid's seeds and offline steps; pixel cells also get the execution-only settings

@@ -28,7 +28,7 @@ def episode_metas(task_id: str, episodes: int, from_disk: bool) -> list[dict]:
     if from_disk:
         from d5rl.datasets.loading import load_dataset
 
-        return list(load_dataset(task_id, episodes=episodes, generate=False).episode_meta)
+        return list(load_dataset(task_id, episodes=episodes, generate=False, render=False).episode_meta)
     gen = make_generator(spec)
     seed = spec.dataset.default_seed
     return [gen.episode(i, episode_rng(seed, i)).meta for i in range(episodes)]
