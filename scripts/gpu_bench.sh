@@ -73,27 +73,6 @@ for d in sorted(glob.glob(sys.argv[1] + "/*/*/*/seed*")):
     print(d, "steps", rows[-1].get("step") if rows else None, "ups", ups[-3:], "wall", done.get("wall_s"),
           "score", done.get("summary", {}).get("score"))
 PY
-python3 - "$W/cells" > $W/archive.txt <<'PY'  # what comes back: every result file, then checkpoints while they fit
-import os, sys
-from pathlib import Path
-from d5rl.runner.report import collect
-from d5rl.runner.videos import ranked_cells
-root, budget = Path(sys.argv[1]), 56 << 20
-skip = ("checkpoint", "checkpoint.prev", ".lock", ".worker.json")
-files = [p for p in root.rglob("*") if p.is_file() and not any(
-    part in skip or part.startswith(".checkpoint.tmp-") for part in p.relative_to(root).parts)]
-results = [r for entry in sorted(root.iterdir()) if entry.is_dir() for r in collect(entry)]
-best = [c[0].directory for t in sorted({r.task for r in results}) if (c := ranked_cells(results, t))]
-todo = [r.directory for r in results if not r.done]
-size = sum(p.stat().st_size for p in files)
-for d in best + todo:
-    ckpt = [p for p in (d / "checkpoint").rglob("*") if p.is_file()]
-    extra = sum(p.stat().st_size for p in ckpt)
-    if ckpt and size + extra <= budget:
-        files += ckpt; size += extra
-print("\n".join(str(p.relative_to(root)) for p in files))
-print(f"archive: {size / 2**20:.1f} MiB, checkpoints of {len(best)} best and {len(todo)} unfinished cells considered",
-      file=sys.stderr)
-PY
+python3 -m d5rl.runner.archive $W/cells --budget-mib 56 > $W/archive.txt  # results, then checkpoints that fit
 tar cz -C $W/cells -T $W/archive.txt | split -b 15m - $OUT/cells.tgz.part- && ls -la $OUT
 stamp done
