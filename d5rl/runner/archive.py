@@ -6,7 +6,8 @@ RUN_DIR is a bench output directory (``TASK/ALGO/seedN`` below it) or a folder o
 (logs, metrics, summaries, ``done`` markers) always come; checkpoints follow in this order while the total
 stays within the budget: each task's best finished cell (the one the report's rollout GIF is made from,
 :func:`d5rl.runner.videos.ranked_cells`), then the unfinished cells (to resume or evaluate them elsewhere).
-Locks, worker records and a checkpoint's previous or half-written copies never come.
+Locks, worker records, TensorBoard event files and a checkpoint's previous or half-written copies never
+come.
 """
 
 from __future__ import annotations
@@ -16,7 +17,7 @@ import sys
 from pathlib import Path
 
 CHECKPOINT = "checkpoint"
-_NEVER = ("checkpoint.prev", ".lock", ".worker.json")
+_NEVER = ("checkpoint.prev", ".lock", ".worker.json", "tb")  # tb: TensorBoard copies of the metrics
 
 
 def _skipped(rel: Path) -> bool:
