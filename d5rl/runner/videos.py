@@ -6,7 +6,8 @@ its agent from the cell's checkpoint, runs five evaluation episodes (seeds 0-4, 
 actions), replays the median-scoring one with the env's render camera (fast render settings, every
 ``EVERY``-th step) and writes it to ``videos/<task>.gif``.  Cells whose checkpoint is not on this
 machine (grids carried between machines keep results, not checkpoints) are passed over for the next
-best; a GIF written earlier is kept when no cell of its task has a checkpoint here.  Needs the
+best, but a GIF written earlier is kept when its caption names a cell ranked above every cell whose
+checkpoint is here (or when no cell of its task has one).  Needs the
 ``train`` extra (JAX) and a GL backend.
 """
 
@@ -89,24 +90,31 @@ def write_gif(path: Path, frames, fps: float) -> None:
 def write_rollout_gifs(results, out_dir: Path, log=print) -> dict[str, str]:
     """``{task: caption}`` for every GIF under ``out_dir/videos`` after writing the ones it can (see the
     module docstring).  A caption names the cell and the episode's score."""
+    from d5rl.runner.report import method_name
+
     videos = Path(out_dir) / "videos"
     captions = read_captions(videos)
     for task in sorted({r.task for r in results}):
+        shown = captions.get(task) if (videos / f"{task}.gif").exists() else None
         for cell in ranked_cells(results, task):
+            if shown is not None and shown.startswith(_cell_label(cell, method_name) + ";"):
+                break  # the GIF already shows this cell, better than any whose checkpoint is here: keep it
             if not (cell.directory / "checkpoint").exists():
                 continue
             frames, fps, seed, scores = typical_rollout(cell.directory, task)
             write_gif(videos / f"{task}.gif", frames, fps)
-            from d5rl.runner.report import method_name
-
-            final = cell.final.get("online", cell.final.get("offline"))
-            captions[task] = (f"{method_name(cell.algo)} seed {cell.seed} (final score {final:.3f}); episode seed "
-                              f"{seed}, the median of {len(scores)} "
+            captions[task] = (f"{_cell_label(cell, method_name)}; episode seed {seed}, the median of {len(scores)} "
                               f"({', '.join(f'{x:.2f}' for x in scores)})")
             log(f"rollout {task}: {captions[task]}")
             break
     _write_captions(videos, captions)
     return captions
+
+
+def _cell_label(cell, method_name) -> str:
+    """How a caption names its cell: method, seed and final score (a cell trained again scores anew)."""
+    final = cell.final.get("online", cell.final.get("offline"))
+    return f"{method_name(cell.algo)} seed {cell.seed} (final score {final:.3f})"
 
 
 def read_captions(videos: Path) -> dict[str, str]:

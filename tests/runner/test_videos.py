@@ -41,11 +41,16 @@ def test_report_renders_the_median_episode_of_the_best_cell(tmp_path):
     frames = imageio.mimread(str(gif))
     assert len(frames) >= 2 and np.asarray(frames[0]).shape[-1] == 3  # (the GIF writer merges repeated frames)
 
-    # a machine without the checkpoints keeps the GIFs already written
-    for c in cells:
-        import shutil
+    import shutil
 
-        shutil.rmtree(c.directory(tmp_path) / "checkpoint")
+    # a machine holding only a weaker cell's checkpoint keeps the GIF of the better one
     before = gif.read_bytes()
+    shutil.rmtree(cells[best].directory(tmp_path) / "checkpoint")
+    write_report(tmp_path, reps=20, plots=False, videos=True)
+    assert gif.read_bytes() == before
+    assert json.loads((tmp_path / "report" / "videos" / "captions.json").read_text()) == captions
+    # ... and a machine without any checkpoint keeps the GIFs already written
+    for c in cells:
+        shutil.rmtree(c.directory(tmp_path) / "checkpoint", ignore_errors=True)
     write_report(tmp_path, reps=20, plots=False, videos=True)
     assert gif.read_bytes() == before
