@@ -16,12 +16,14 @@ import argparse
 import sys
 from pathlib import Path
 
-CHECKPOINT = "checkpoint"
-_NEVER = ("checkpoint.prev", ".lock", ".worker.json", "tb")  # tb: TensorBoard copies of the metrics
+from d5rl.runner.grid import LOCK_FILE, WORKER_FILE
+from d5rl.training.checkpoint import LATEST, PREVIOUS, TMP_PREFIX
+
+_NEVER = (PREVIOUS, LOCK_FILE, WORKER_FILE, "tb")  # tb: TensorBoard copies of the metrics
 
 
 def _skipped(rel: Path) -> bool:
-    return any(p == CHECKPOINT or p in _NEVER or p.startswith(".checkpoint.tmp-") for p in rel.parts)
+    return any(p == LATEST or p in _NEVER or p.startswith(TMP_PREFIX) for p in rel.parts)
 
 
 def _files(d: Path) -> list[Path]:
@@ -42,9 +44,9 @@ def archive_files(run_dir: Path | str, budget_bytes: int) -> tuple[list[Path], l
     unfinished = [r.directory for r in results if not r.done]
     kept = []
     for cell_dir in best + unfinished:
-        ckpt = _files(cell_dir / CHECKPOINT) if (cell_dir / CHECKPOINT).is_dir() else []
+        ckpt = _files(cell_dir / LATEST) if (cell_dir / LATEST).is_dir() else []
         extra = sum(p.stat().st_size for p in ckpt)
-        if ckpt and cell_dir not in kept and size + extra <= budget_bytes:
+        if ckpt and size + extra <= budget_bytes:  # (best cells are finished: the two lists are disjoint)
             files += ckpt
             size += extra
             kept.append(cell_dir)

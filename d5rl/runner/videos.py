@@ -90,20 +90,20 @@ def write_gif(path: Path, frames, fps: float) -> None:
 def write_rollout_gifs(results, out_dir: Path, log=print) -> dict[str, str]:
     """``{task: caption}`` for every GIF under ``out_dir/videos`` after writing the ones it can (see the
     module docstring).  A caption names the cell and the episode's score."""
-    from d5rl.runner.report import method_name
+    from d5rl.training.checkpoint import LATEST
 
     videos = Path(out_dir) / "videos"
     captions = read_captions(videos)
     for task in sorted({r.task for r in results}):
         shown = captions.get(task) if (videos / f"{task}.gif").exists() else None
         for cell in ranked_cells(results, task):
-            if shown is not None and shown.startswith(_cell_label(cell, method_name) + ";"):
+            if shown is not None and shown.startswith(_cell_label(cell) + ";"):
                 break  # the GIF already shows this cell, better than any whose checkpoint is here: keep it
-            if not (cell.directory / "checkpoint").exists():
+            if not (cell.directory / LATEST).exists():
                 continue
             frames, fps, seed, scores = typical_rollout(cell.directory, task)
             write_gif(videos / f"{task}.gif", frames, fps)
-            captions[task] = (f"{_cell_label(cell, method_name)}; episode seed {seed}, the median of {len(scores)} "
+            captions[task] = (f"{_cell_label(cell)}; episode seed {seed}, the median of {len(scores)} "
                               f"({', '.join(f'{x:.2f}' for x in scores)})")
             log(f"rollout {task}: {captions[task]}")
             break
@@ -111,8 +111,10 @@ def write_rollout_gifs(results, out_dir: Path, log=print) -> dict[str, str]:
     return captions
 
 
-def _cell_label(cell, method_name) -> str:
+def _cell_label(cell) -> str:
     """How a caption names its cell: method, seed and final score (a cell trained again scores anew)."""
+    from d5rl.runner.report import method_name
+
     final = cell.final.get("online", cell.final.get("offline"))
     return f"{method_name(cell.algo)} seed {cell.seed} (final score {final:.3f})"
 

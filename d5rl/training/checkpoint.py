@@ -34,6 +34,7 @@ from d5rl.errors import D5RLError
 
 FORMAT_VERSION = 1
 LATEST, PREVIOUS = "checkpoint", "checkpoint.prev"
+TMP_PREFIX = ".checkpoint.tmp-"  # a checkpoint being written: .checkpoint.tmp-<pid>
 MANIFEST = "manifest.json"
 
 
@@ -69,9 +70,9 @@ def _fsync_dir(path: Path) -> None:
 def save_checkpoint(run_dir: str | Path, ckpt: Checkpoint) -> Path:
     """Write ``run_dir/checkpoint`` atomically, keeping the one before as ``checkpoint.prev``."""
     run_dir = Path(run_dir)
-    for stale in run_dir.glob(".checkpoint.tmp-*"):  # a killed writer's leftovers
+    for stale in run_dir.glob(f"{TMP_PREFIX}*"):  # a killed writer's leftovers
         shutil.rmtree(stale, ignore_errors=True)
-    tmp = run_dir / f".checkpoint.tmp-{os.getpid()}"
+    tmp = run_dir / f"{TMP_PREFIX}{os.getpid()}"
     tmp.mkdir(parents=True)
     files = {"agent.msgpack": bytes(ckpt.agent),
              "state.json": (json.dumps(ckpt.state, sort_keys=True, allow_nan=False) + "\n").encode()}

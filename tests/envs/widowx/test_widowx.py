@@ -193,7 +193,6 @@ def test_object_on_table_does_not_count(env):
     assert not any(info["episode_stats"].values())
 
 
-
 def test_object_off_the_table_lands_on_the_floor(env):
     """The room's floor collides: a toy that leaves the table comes to rest on it (dataset v2 and older: the
     floor was visual only and one toy in each WidowX dataset fell to z = -127 m)."""
@@ -206,6 +205,7 @@ def test_object_off_the_table_lands_on_the_floor(env):
     floor = -tabletop.TABLE_HEIGHT
     assert floor < z < floor + 0.1, f"the toy's centre is at z = {z:.3f} m, the floor at {floor} m"
     assert env.index.object_speed(env.data, "duck") < 0.01  # at rest
+
 
 # --- scripted policy ---------------------------------------------------------------------
 def test_scripted_grasp_success_band():
