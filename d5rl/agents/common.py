@@ -160,10 +160,23 @@ class Agent(flax.struct.PyTreeNode):
         return a[0] if single else a
 
     def eval_actions(self, observations, seed=None):
-        """Deterministic (or, for diffusion policies, seeded) actions for evaluation."""
+        """Deterministic (or, for diffusion and flow policies, seeded) actions for evaluation.
+
+        ``seed``: one key for the whole batch, or a stack of keys, one per row (shape ``(batch, 2)``):
+        then each row's action depends only on its observation and its key, not on the rows beside it,
+        which is what lets evaluation step any number of episodes together.
+        """
         obs, single = to_batched(observations, self.obs_ndim)
-        a = self._eval(obs, self.rng if seed is None else seed)
+        if seed is not None and np.ndim(seed) == 2:
+            a = self._eval_rows(obs, jnp.asarray(seed))
+        else:
+            a = self._eval(obs, self.rng if seed is None else seed)
         return a[0] if single else a
+
+    @jax.jit
+    def _eval_rows(self, obs, keys):
+        one = lambda o, k: self._eval(jax.tree_util.tree_map(lambda x: x[None], o), k)[0]
+        return jax.vmap(one)(obs, keys)
 
     @functools.partial(jax.jit, static_argnames=("temperature",))
     def _sample(self, obs, seed, temperature=1.0):

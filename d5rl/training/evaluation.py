@@ -37,8 +37,8 @@ def evaluate(
 
     ``num_envs`` environments step in lockstep and the agent acts on all of them in
     one batch; ``processes=True`` puts each in its own process (gymnasium
-    ``AsyncVectorEnv``).  Episode ``i`` resets with seed ``seed + i``, so results do
-    not depend on ``num_envs``.  ``video_path`` records the first episode.
+    ``AsyncVectorEnv``).  Episode ``i`` resets with seed ``seed + i`` and a stochastic
+    policy acts in it with keys drawn from ``(seed, i, step)``, so results do not depend on ``num_envs``.  ``video_path`` records the first episode.
     """
     if int(num_episodes) < 1:
         from d5rl.errors import D5RLError
@@ -70,10 +70,10 @@ def evaluate(
             if render and ep == 0:
                 frames.append(_render(envs, vec, processes))
             while not done.all():
-                key, k = jax.random.split(key)
                 live = np.flatnonzero(~done)
                 batch = _stack_obs([obs[i] for i in live])
-                actions = np.asarray(agent.eval_actions(batch, seed=k))
+                keys = _step_keys(key, ep + live, length[live])
+                actions = np.asarray(agent.eval_actions(batch, seed=keys))
                 if processes:
                     full = np.zeros((num_envs,) + actions.shape[1:], np.float32)
                     full[live] = actions
@@ -128,6 +128,13 @@ def evaluate(
         _write_video(Path(video_path), frames)
         out["video"] = str(video_path)
     return out
+
+
+@jax.jit
+def _step_keys(key, episodes, steps):
+    """One key per (episode, step): a stochastic policy's action in episode ``i`` at step ``t`` is the same
+    whichever episodes step beside it, so the result does not depend on ``num_envs``."""
+    return jax.vmap(lambda e, t: jax.random.fold_in(jax.random.fold_in(key, e), t))(episodes, steps)
 
 
 def _unbatch_info(info: dict, j: int) -> dict:

@@ -35,6 +35,10 @@ def check_agent(name):
     a = np.asarray(agent.sample_actions(single, seed=jax.random.PRNGKey(0)))
     assert a.shape == (2,) and np.all(np.abs(a) <= 1)
     assert np.asarray(agent.eval_actions(b["observations"])).shape == (16, 2)
+    keys = jax.random.split(jax.random.PRNGKey(1), 16)  # a key per row (evaluation): rows act alone
+    rows = np.asarray(agent.eval_actions(b["observations"], seed=keys))
+    first = jax.tree_util.tree_map(lambda x: x[:1], b["observations"])
+    np.testing.assert_allclose(rows[:1], np.asarray(agent.eval_actions(first, seed=keys[:1])), atol=1e-5)
 
 
 def test_pixel_bc():

@@ -64,6 +64,19 @@ def test_evaluation_does_not_depend_on_env_count():
     assert one["length"] == 25 and 0 <= one["success"] <= 1
 
 
+def test_stochastic_evaluation_does_not_depend_on_env_count():
+    """A diffusion policy samples its actions: each episode draws its own keys, whatever steps beside it."""
+    from d5rl.training.evaluation import evaluate
+    from tests.agents.helpers import make_agent
+
+    agent = make_agent("ddpm_bc", diffusion_steps=3)
+    one = evaluate(agent, "toy-reach-v0", 3, seed=3, num_envs=1)
+    three = evaluate(agent, "toy-reach-v0", 3, seed=3, num_envs=3)
+    np.testing.assert_allclose(one["returns"], three["returns"], rtol=1e-5)
+    other = evaluate(agent, "toy-reach-v0", 3, seed=4, num_envs=3)  # other episodes: not the same numbers
+    assert not np.allclose(one["returns"], other["returns"])
+
+
 def test_cli_parsers(tmp_path, capsys):
     from d5rl.training.cli import add_eval_parser, add_train_parser
 
