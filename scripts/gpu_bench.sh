@@ -1,13 +1,14 @@
 #!/bin/bash
 # Table 1 cells on a bare GPU machine with no network (the README's GPU runs, issues 20 and 21): pixel cells,
-# and state cells whose agents are too slow for a 2-core CPU (CQL, CalQL, FQL: 13-19 updates/s there):
+# and state cells whose agents are too slow for a 2-core CPU (CQL, CalQL, FQL: 13-19 updates/s there; RLPD 5.6, its 20 critic updates a step):
 #   STEPS=3000 BUDGET=545 bash scripts/gpu_bench.sh   # the randomized kitchen from its cameras, 100 episodes
 #   CELLS="wx-sorting-v0:bc,iql:16:4 kitchen-standard-mixed-v0:iql:12:2" BUDGET=560 bash scripts/gpu_bench.sh
 #   A=fql,cql,calql,idql,ddpm_bc,rebrac,iql,td3bc,bc   # WidowX from state (README, "Table 1 from state")
 #   SEEDS=0-2 STEPS=10000 CELLS="wx-sorting-state-v0:$A:16:8 wx-sorting-pickplacedata-state-v0:$A:16:8" \
 #     BUDGET=520 bash scripts/gpu_bench.sh
+#   CELLS="a1-walk-v0:cql,calql:2:8:final_eval_episodes=20 ..."   # A1 (state), with its 20-episode evaluation
 # CELLS lists TASK:ALGOS:GENERATE_WORKERS:BENCH_WORKERS[:SET,SET...]; each entry generates its data (one
-# entry at a time; a `-state` task's without frames) and then runs its cells beside the others.  SEEDS (0-1)
+# entry at a time; a state task's without frames) and then runs its cells beside the others.  SEEDS (0-1)
 # and STEPS (5000) are the grid's seeds and offline steps; pixel cells also get the execution-only settings
 # below.  Call it again on the same (still warm) machine to go on: packages, data and cells live in .dwork/ of
 # the checkout, which .gitignore names so that the device keeps it between calls (on 2026-11-26 it was ignored
@@ -50,7 +51,9 @@ gen() { local s=$(date +%s); cli $(( $(left) - 20 )) generate "$@" 2>&1 | tr '\r
         stamp "generate+render $*: $(( $(date +%s) - s )) s"; }
 entry() {  # TASK ALGOS GENERATE_WORKERS BENCH_WORKERS [SET,SET...]: its data (one entry at a time), then its cells
   local sets="$PIXELS" prefix="" render=""
-  [[ $1 == *-state-v* ]] && { sets=""; render="--no-render"; }  # state cells: no frames to hold or render
+  # state cells (kitchen and WidowX -state twins, A1): no frames to hold or render
+  [ "$(python3 -c "from d5rl.registry import get_spec; print(get_spec('$1').observation)")" = state ] && \
+    { sets=""; render="--no-render"; }
   for kv in ${5//,/ }; do sets="$sets --set $kv"; [[ $kv == dataset_episodes=* ]] && prefix="--episodes ${kv#*=}"; done
   ( flock 9; gen $1 --workers $3 $prefix $render ) 9>$W/generate.lock  # cells on a prefix of the data need only that prefix
   cli $(( $(left) - 25 )) bench --tasks $1 --algos ${2//,/ } $B $sets --workers $4 --out $W/cells/$1 > $W/bench-$1.log 2>&1
