@@ -1,6 +1,7 @@
 #!/bin/bash
 # Table 1 cells on a bare GPU machine with no network (the README's GPU runs, issues 20 and 21): pixel cells,
-# and state cells whose agents are too slow for a 2-core CPU (CQL, CalQL, FQL: 13-19 updates/s there; RLPD 5.6, its 20 critic updates a step):
+# and state cells whose agents are too slow for a 2-core CPU (CQL, CalQL, FQL: 13-19 updates/s there; RLPD 5.6,
+# its 20 critic updates a step):
 #   STEPS=3000 BUDGET=545 bash scripts/gpu_bench.sh   # the randomized kitchen from its cameras, 100 episodes
 #   CELLS="wx-sorting-v0:bc,iql:16:4 kitchen-standard-mixed-v0:iql:12:2" BUDGET=560 bash scripts/gpu_bench.sh
 #   A=fql,cql,calql,idql,ddpm_bc,rebrac,iql,td3bc,bc   # WidowX from state (README, "Table 1 from state")
