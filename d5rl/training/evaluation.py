@@ -38,7 +38,8 @@ def evaluate(
     ``num_envs`` environments step in lockstep and the agent acts on all of them in
     one batch; ``processes=True`` puts each in its own process (gymnasium
     ``AsyncVectorEnv``).  Episode ``i`` resets with seed ``seed + i`` and a stochastic
-    policy acts in it with keys drawn from ``(seed, i, step)``, so results do not depend on ``num_envs``.  ``video_path`` records the first episode.
+    policy acts in it with keys drawn from ``(seed, i, step)``, so results do not depend
+    on ``num_envs``.  ``video_path`` records the first episode.
     """
     if int(num_episodes) < 1:
         from d5rl.errors import D5RLError
