@@ -185,17 +185,30 @@ def _table_rows(table: dict, algos: list[str]):
     return rows
 
 
+def _most_seeds(rows) -> int:
+    """The largest number of seeds behind any entry of a table."""
+    return max((e[2] for _, _, entries in rows for e in entries.values() if e is not None), default=0)
+
+
+def _entry(e, seeds: int) -> str:
+    """One table entry: "mean ± std", "(n=k)" added where fewer seeds stand behind it than behind the
+    table's fullest entry (a grid not yet finished), "-" where none."""
+    if e is None:
+        return "-"
+    return f"{_fmt(e[0])} ± {_fmt(e[1])}" + (f" (n={e[2]})" if e[2] < seeds else "")
+
+
 def table_markdown(table: dict, title: str) -> str:
     algos = _method_order({a for _, a in table})
     rows = _table_rows(table, algos)
     lines = [f"### {title}", "", "| Environment | Task | " + " | ".join(method_name(a) for a in algos) + " |",
              "|---|---|" + "---|" * len(algos)]
+    seeds = _most_seeds(rows)
     prev = None
     for env, task, entries in rows:
         cells = []
         for a in algos:
-            e = entries[a]
-            cells.append("-" if e is None else f"{_fmt(e[0])} ± {_fmt(e[1])}" + (f" (n={e[2]})" if e[2] < 2 else ""))
+            cells.append(_entry(entries[a], seeds))
         lines.append(f"| {env if env != prev else ''} | {task} | " + " | ".join(cells) + " |")
         prev = env
     return "\n".join(lines) + "\n"
@@ -215,12 +228,12 @@ def comparison_markdown(table: dict, phase: str, title: str) -> str | None:
              "with its camera task's row). `-`: not run here, or not in the paper.", "",
              "| Environment | Task | " + " | ".join(method_name(a) for a in algos) + " |",
              "|---|---|" + "---|" * len(algos)]
+    seeds = _most_seeds(_table_rows(table, algos))  # over every row, as in the table without the paper's
     prev = None
     for env, task, entries in rows:
         cells = []
         for a in algos:
-            e, p = entries[a], paper_result(task, a, phase)
-            ours = "-" if e is None else f"{_fmt(e[0])} ± {_fmt(e[1])}" + (f" (n={e[2]})" if e[2] < 2 else "")
+            ours, p = _entry(entries[a], seeds), paper_result(task, a, phase)
             paper = "-" if p is None else _fmt(p[0]) + ("" if p[1] is None else f" ± {_fmt(p[1])}")
             cells.append(f"{ours} / {paper}")
         label = task if paper_task(task) == task else f"{task} (paper: {paper_task(task)})"

@@ -112,3 +112,20 @@ def test_what_the_agents_do_from_their_episode_stats(tmp_path):
     assert "| Method | Cells | microwave | slide cabinet |" in report
     assert "| BC | 2 | 0.75 | 0.10 |" in report
     assert "| IQL | 1 | 0.00 | - |" in report
+
+
+def test_an_entry_with_fewer_seeds_than_the_table_says_how_many(tmp_path):
+    truth = _fake_run(tmp_path, np.random.default_rng(2))
+    for seed in (1, 2):  # a1-walk IQL: seed 0 only; a1-run BC: seeds 0-1
+        (Cell("a1-walk-v0", "iql", seed, 100, 50).directory(tmp_path) / "done").unlink()
+    (Cell("a1-run-v0", "bc", 2, 100, 0).directory(tmp_path) / "done").unlink()
+    write_report(tmp_path, reps=50, plots=False)
+    for name in ("table1_offline.md", "table1_offline_vs_paper.md"):
+        md = (tmp_path / "report" / name).read_text()
+        rows = {line.split("|")[2].strip().split(" ")[0]: [c.strip() for c in line.split("|")[3:-1]]
+                for line in md.splitlines() if "| a1-" in line}
+        walk_iql = truth[("a1-walk-v0", "iql", 0)][0]
+        assert rows["a1-walk-v0"][1].startswith(f"{walk_iql:.3f} ± 0.000 (n=1)")
+        run_bc = [truth[("a1-run-v0", "bc", s)][0] for s in (0, 1)]
+        assert rows["a1-run-v0"][0].startswith(f"{np.mean(run_bc):.3f} ± {np.std(run_bc):.3f} (n=2)")
+        assert "(n=" not in rows["a1-walk-v0"][0] and "(n=" not in rows["a1-run-v0"][1]  # three seeds
