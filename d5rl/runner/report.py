@@ -219,7 +219,8 @@ def comparison_markdown(table: dict, phase: str, title: str) -> str | None:
     from d5rl.runner.paper import paper_result, paper_task
 
     algos = _method_order({a for _, a in table})
-    rows = [r for r in _table_rows(table, algos) if any(paper_result(r[1], a, phase) for a in algos)]
+    every_row = _table_rows(table, algos)
+    rows = [r for r in every_row if any(paper_result(r[1], a, phase) for a in algos)]
     if not rows:
         return None
     lines = [f"### {title} (ours / paper)", "",
@@ -228,7 +229,7 @@ def comparison_markdown(table: dict, phase: str, title: str) -> str | None:
              "with its camera task's row). `-`: not run here, or not in the paper.", "",
              "| Environment | Task | " + " | ".join(method_name(a) for a in algos) + " |",
              "|---|---|" + "---|" * len(algos)]
-    seeds = _most_seeds(_table_rows(table, algos))  # over every row, as in the table without the paper's
+    seeds = _most_seeds(every_row)  # over every row, as in the table without the paper's
     prev = None
     for env, task, entries in rows:
         cells = []
