@@ -198,20 +198,25 @@ def _entry(e, seeds: int) -> str:
     return f"{_fmt(e[0])} ± {_fmt(e[1])}" + (f" (n={e[2]})" if e[2] < seeds else "")
 
 
+def _grid_markdown(algos: list[str], rows, cell, label=lambda task: task) -> list[str]:
+    """The header and the environment-grouped rows of a task x method table; ``cell(task, algo, entry)``
+    writes one entry, ``label(task)`` one task's name."""
+    lines = ["| Environment | Task | " + " | ".join(method_name(a) for a in algos) + " |",
+             "|---|---|" + "---|" * len(algos)]
+    prev = None
+    for env, task, entries in rows:
+        cells = " | ".join(cell(task, a, entries[a]) for a in algos)
+        lines.append(f"| {env if env != prev else ''} | {label(task)} | {cells} |")
+        prev = env
+    return lines
+
+
 def table_markdown(table: dict, title: str) -> str:
     algos = _method_order({a for _, a in table})
     rows = _table_rows(table, algos)
-    lines = [f"### {title}", "", "| Environment | Task | " + " | ".join(method_name(a) for a in algos) + " |",
-             "|---|---|" + "---|" * len(algos)]
     seeds = _most_seeds(rows)
-    prev = None
-    for env, task, entries in rows:
-        cells = []
-        for a in algos:
-            cells.append(_entry(entries[a], seeds))
-        lines.append(f"| {env if env != prev else ''} | {task} | " + " | ".join(cells) + " |")
-        prev = env
-    return "\n".join(lines) + "\n"
+    lines = _grid_markdown(algos, rows, lambda task, a, e: _entry(e, seeds))
+    return "\n".join([f"### {title}", ""] + lines) + "\n"
 
 
 def comparison_markdown(table: dict, phase: str, title: str) -> str | None:
@@ -223,24 +228,21 @@ def comparison_markdown(table: dict, phase: str, title: str) -> str | None:
     rows = [r for r in every_row if any(paper_result(r[1], a, phase) for a in algos)]
     if not rows:
         return None
-    lines = [f"### {title} (ours / paper)", "",
+    seeds = _most_seeds(every_row)  # over every row, as in the table without the paper's
+
+    def cell(task, a, e):
+        p = paper_result(task, a, phase)
+        paper = "-" if p is None else _fmt(p[0]) + ("" if p[1] is None else f" ± {_fmt(p[1])}")
+        return f"{_entry(e, seeds)} / {paper}"
+
+    def label(task):
+        return task if paper_task(task) == task else f"{task} (paper: {paper_task(task)})"
+
+    intro = [f"### {title} (ours / paper)", "",
              "Each entry: this run's mean ± std over seeds / the paper's (500k steps per phase, its own data "
              "and score references; its kitchen and WidowX agents see cameras, so a `-state` task is compared "
-             "with its camera task's row). `-`: not run here, or not in the paper.", "",
-             "| Environment | Task | " + " | ".join(method_name(a) for a in algos) + " |",
-             "|---|---|" + "---|" * len(algos)]
-    seeds = _most_seeds(every_row)  # over every row, as in the table without the paper's
-    prev = None
-    for env, task, entries in rows:
-        cells = []
-        for a in algos:
-            ours, p = _entry(entries[a], seeds), paper_result(task, a, phase)
-            paper = "-" if p is None else _fmt(p[0]) + ("" if p[1] is None else f" ± {_fmt(p[1])}")
-            cells.append(f"{ours} / {paper}")
-        label = task if paper_task(task) == task else f"{task} (paper: {paper_task(task)})"
-        lines.append(f"| {env if env != prev else ''} | {label} | " + " | ".join(cells) + " |")
-        prev = env
-    return "\n".join(lines) + "\n"
+             "with its camera task's row). `-`: not run here, or not in the paper.", ""]
+    return "\n".join(intro + _grid_markdown(algos, rows, cell, label)) + "\n"
 
 
 def _data_label(data: dict | None) -> str:
