@@ -80,3 +80,8 @@ def paper_task(task: str) -> str:
 def paper_result(task: str, algo: str, phase: str) -> tuple[float, float | None] | None:
     """The paper's (mean, ±) for a (task, algorithm) in ``phase`` ('offline' or 'online'), or None."""
     return PAPER.get(phase, {}).get(paper_task(task), {}).get(algo)
+
+
+def paper_methods(task: str, phase: str) -> set[str]:
+    """The methods the paper reports for ``task`` in ``phase``."""
+    return set(PAPER.get(phase, {}).get(paper_task(task), {}))

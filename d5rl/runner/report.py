@@ -220,15 +220,20 @@ def table_markdown(table: dict, title: str) -> str:
 
 
 def comparison_markdown(table: dict, phase: str, title: str) -> str | None:
-    """Our table next to the paper's: each entry "ours / paper" (mean ± std), None if the paper has no row."""
-    from d5rl.runner.paper import paper_result, paper_task
+    """Our table next to the paper's: each entry "ours / paper" (mean ± std), None if the paper has no row.
 
-    algos = _method_order({a for _, a in table})
-    every_row = _table_rows(table, algos)
-    rows = [r for r in every_row if any(paper_result(r[1], a, phase) for a in algos)]
+    Its columns are the methods run here and every method the paper reports for these rows, so a method
+    not run yet shows as "- / the paper's number" rather than vanishing from the table."""
+    from d5rl.runner.paper import paper_methods, paper_result, paper_task
+
+    ours = {a for _, a in table}
+    every_row = _table_rows(table, _method_order(ours))
+    rows = [r for r in every_row if any(paper_result(r[1], a, phase) for a in ours | paper_methods(r[1], phase))]
     if not rows:
         return None
     seeds = _most_seeds(every_row)  # over every row, as in the table without the paper's
+    algos = _method_order(ours.union(*(paper_methods(task, phase) for _, task, _ in rows)))
+    rows = [(env, task, {a: entries.get(a) for a in algos}) for env, task, entries in rows]
 
     def cell(task, a, e):
         p = paper_result(task, a, phase)
@@ -241,7 +246,7 @@ def comparison_markdown(table: dict, phase: str, title: str) -> str | None:
     intro = [f"### {title} (ours / paper)", "",
              "Each entry: this run's mean ± std over seeds / the paper's (500k steps per phase, its own data "
              "and score references; its kitchen and WidowX agents see cameras, so a `-state` task is compared "
-             "with its camera task's row). `-`: not run here, or not in the paper.", ""]
+             "with its camera task's row). `-`: not run here (yet), or not in the paper.", ""]
     return "\n".join(intro + _grid_markdown(algos, rows, cell, label)) + "\n"
 
 
