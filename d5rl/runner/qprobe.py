@@ -9,8 +9,8 @@ lie from the data's (mean absolute difference per action dimension).
 
 Why it helps: a conservative critic that values the policy's actions a gap ``g`` below the data's
 carries that gap into every backup (its target takes π's action at s'), so with mean reward ``r̄``
-its values head for about (r̄ − γ·g) / (1 − γ), below zero once γ·g > r̄, whatever the rewards'
-sign. A negative gap (the policy's actions valued above the data's) is a less conservative critic.
+its values head for about (r̄ − γ·g) / (1 − γ): below zero once γ·g > r̄, even where no reward is
+negative. A negative gap (the policy's actions valued above the data's) is a less conservative critic.
 For agents with a Q critic of ``(observations, actions)`` (CQL, CalQL, IQL, TD3+BC, RLPD, ReBRAC,
 IDQL, FQL) from state observations.
 """

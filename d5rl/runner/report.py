@@ -228,7 +228,7 @@ def comparison_markdown(table: dict, phase: str, title: str) -> str | None:
 
     ours = {a for _, a in table}
     every_row = _table_rows(table, _method_order(ours))
-    rows = [r for r in every_row if any(paper_result(r[1], a, phase) for a in ours | paper_methods(r[1], phase))]
+    rows = [r for r in every_row if paper_methods(r[1], phase)]
     if not rows:
         return None
     seeds = _most_seeds(every_row)  # over every row, as in the table without the paper's
