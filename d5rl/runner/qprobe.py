@@ -75,7 +75,7 @@ def main(argv=None) -> int:
     try:
         results = [probe_run(run, args.samples, args.seed) for run in args.runs]
     except D5RLError as e:
-        print(f"error: {e.message}" + (f" (hint: {e.hint})" if e.hint else ""), file=sys.stderr)
+        print(f"error: {e}", file=sys.stderr)  # D5RLError reads "message (hint: ...)"
         return 2
     print("| run | mean reward | Q(s, a_data) | Q(s, π(s)) | Q(s, uniform) | gap data − π | abs(π(s) − a_data) |")
     print("|---|---|---|---|---|---|---|")

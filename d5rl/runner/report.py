@@ -226,14 +226,12 @@ def comparison_markdown(table: dict, phase: str, title: str) -> str | None:
     not run yet shows as "- / the paper's number" rather than vanishing from the table."""
     from d5rl.runner.paper import paper_methods, paper_result, paper_task
 
-    ours = {a for _, a in table}
-    every_row = _table_rows(table, _method_order(ours))
+    algos = _method_order({a for _, a in table}.union(*(paper_methods(t, phase) for t, _ in table)))
+    every_row = _table_rows(table, algos)
     rows = [r for r in every_row if paper_methods(r[1], phase)]
     if not rows:
         return None
     seeds = _most_seeds(every_row)  # over every row, as in the table without the paper's
-    algos = _method_order(ours.union(*(paper_methods(task, phase) for _, task, _ in rows)))
-    rows = [(env, task, {a: entries.get(a) for a in algos}) for env, task, entries in rows]
 
     def cell(task, a, e):
         p = paper_result(task, a, phase)
