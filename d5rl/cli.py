@@ -307,7 +307,7 @@ def main(argv: list[str] | None = None) -> int:
     except D5RLError as e:
         if debug:
             raise
-        print(f"error: {e.message}" + (f" (hint: {e.hint})" if e.hint else ""), file=sys.stderr)
+        print(f"error: {e}", file=sys.stderr)
         return 2
     except KeyboardInterrupt:
         print("interrupted; run the same command again to resume where it stopped", file=sys.stderr)

@@ -15,12 +15,12 @@ class D5RLError(Exception):
         self.hint = hint
         super().__init__(message if hint is None else f"{message} (hint: {hint})")
 
+    def __str__(self) -> str:  # the same one line for every subclass (KeyError's would quote it)
+        return self.message if self.hint is None else f"{self.message} (hint: {self.hint})"
+
 
 class UnknownTaskError(D5RLError, KeyError):
     """A task id that no family registers."""
-
-    def __str__(self) -> str:  # KeyError would quote the message
-        return Exception.__str__(self)
 
 
 class TaskIdError(D5RLError, ValueError):

@@ -36,8 +36,7 @@ AGENTS = {
 
 
 class UnknownAgentError(D5RLError, KeyError):
-    def __str__(self) -> str:
-        return Exception.__str__(self)
+    """An algorithm name that :data:`AGENTS` does not know."""
 
 
 def canonical_name(name: str) -> str:

@@ -20,9 +20,6 @@ from d5rl.errors import D5RLError
 class ConfigError(D5RLError, KeyError):
     """An unknown config key or a value that does not parse as its default's type."""
 
-    def __str__(self) -> str:
-        return Exception.__str__(self)
-
 
 def _freeze(value: Any) -> Any:
     if isinstance(value, list):

@@ -108,7 +108,7 @@ def cmd_bench(args) -> int:
             path = write_report(args.out)
             print(f"report: {path}", file=sys.stderr)
         except ReportError as e:
-            print(f"no report: {e.message}", file=sys.stderr)
+            print(f"no report: {e}", file=sys.stderr)
     return 1 if result.failed else 0
 
 
