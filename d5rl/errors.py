@@ -13,7 +13,7 @@ class D5RLError(Exception):
     def __init__(self, message: str, hint: str | None = None):
         self.message = message
         self.hint = hint
-        super().__init__(message if hint is None else f"{message} (hint: {hint})")
+        super().__init__(str(self))
 
     def __str__(self) -> str:  # the same one line for every subclass (KeyError's would quote it)
         return self.message if self.hint is None else f"{self.message} (hint: {self.hint})"
