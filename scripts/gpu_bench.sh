@@ -10,7 +10,8 @@
 #   CELLS="a1-walk-v0:cql,calql:2:8:final_eval_episodes=20 ..."   # A1 (state), with its 20-episode evaluation
 # CELLS lists TASK:ALGOS:GENERATE_WORKERS:BENCH_WORKERS[:SET,SET...]; each entry generates its data (one
 # entry at a time; a state task's without frames) and then runs its cells beside the others.  SEEDS (0-1)
-# and STEPS (5000) are the grid's seeds and offline steps; pixel cells also get the execution-only settings
+# and STEPS (5000) are the grid's seeds and offline steps, or an entry's own with seeds=0-2,steps=10000
+# among its SETs (pixel and state entries in one call); pixel cells also get the execution-only settings
 # below.  Call it again on the same (still warm) machine to go on: packages, data and cells live in .dwork/ of
 # the checkout, which .gitignore names so that the device keeps it between calls (on 2026-11-26 it was ignored
 # only in .git/info/exclude, which does not travel, and the second call found it gone), so a second call skips
@@ -45,19 +46,25 @@ CELLS=${CELLS:-"kitchen-randomized-mixed-v0:bc,iql:16:4:dataset_episodes=100,fin
 # batch; checkpoint_interval: a call cut short loses at most 1,000 steps a cell; eval_processes: the final
 # evaluation steps its 5 environments in 5 processes (one process could not finish 50 episodes of the randomized
 # kitchen, 500 steps and 3 cameras each, in 260 s while two IQL cells trained beside it).  All are execution-only.
-B="--seeds ${SEEDS:-0-1} --offline-steps ${STEPS:-5000} --no-report --no-progress --set checkpoint_interval=1000"
+B="--no-report --no-progress --set checkpoint_interval=1000"
 PIXELS="--set dataset_in_memory_gb=16 --set eval_processes=true"
-cli() { local t=$1; shift; timeout $t python3 -m d5rl.cli "$@"; }
+cli() { local t=$1; shift; [ "$t" -gt 0 ] || { stamp "no time left for: $*"; return 124; }; timeout $t python3 -m d5rl.cli "$@"; }
 gen() { local s=$(date +%s); cli $(( $(left) - 20 )) generate "$@" 2>&1 | tr '\r' '\n' | grep -v "it/s\|ep/s" | tail -2
         stamp "generate+render $*: $(( $(date +%s) - s )) s"; }
 entry() {  # TASK ALGOS GENERATE_WORKERS BENCH_WORKERS [SET,SET...]: its data (one entry at a time), then its cells
-  local sets="$PIXELS" prefix="" render=""
+  local sets="$PIXELS" prefix="" render="" seeds=${SEEDS:-0-1} steps=${STEPS:-5000}
   # state cells (kitchen and WidowX -state twins, A1): no frames to hold or render
   [ "$(python3 -c "from d5rl.registry import get_spec; print(get_spec('$1').observation)")" = state ] && \
     { sets=""; render="--no-render"; }
-  for kv in ${5//,/ }; do sets="$sets --set $kv"; [[ $kv == dataset_episodes=* ]] && prefix="--episodes ${kv#*=}"; done
+  for kv in ${5//,/ }; do
+    case $kv in
+      seeds=*) seeds=${kv#*=} ;;  # this entry's seeds and offline steps instead of SEEDS and STEPS
+      steps=*) steps=${kv#*=} ;;
+      *) sets="$sets --set $kv"; [[ $kv == dataset_episodes=* ]] && prefix="--episodes ${kv#*=}" ;;
+    esac
+  done
   ( flock 9; gen $1 --workers $3 $prefix $render ) 9>$W/generate.lock  # cells on a prefix of the data need only that prefix
-  cli $(( $(left) - 25 )) bench --tasks $1 --algos ${2//,/ } $B $sets --workers $4 --out $W/cells/$1 > $W/bench-$1.log 2>&1
+  cli $(( $(left) - 25 )) bench --tasks $1 --algos ${2//,/ } --seeds $seeds --offline-steps $steps $B $sets --workers $4 --out $W/cells/$1 > $W/bench-$1.log 2>&1
 }
 for e in $CELLS; do IFS=: read -r t a gw bw sets <<< "$e"; entry "$t" "$a" "$gw" "$bw" "$sets" & sleep 1; done
 progress() { for d in $W/cells/*/*/*/seed*; do [ -d $d ] || continue; printf ' %s:%s' "$(basename $(dirname $(dirname $(dirname $d))))-$(basename $(dirname $d))$(basename $d | tr -d seed)" \
