@@ -16,7 +16,10 @@
 # the checkout, which .gitignore names so that the device keeps it between calls (on 2026-11-26 it was ignored
 # only in .git/info/exclude, which does not travel, and the second call found it gone), so a second call skips
 # what is done and resumes unfinished cells from their checkpoints.  LOCAL=1 skips the machine setup (a dry run
-# here; CELLS and STEPS make it small).
+# here; CELLS and STEPS make it small).  GRID=docs/results/table1-state/cells (a grid's cells folder in the
+# checkout, which travels with it) makes each entry skip the cells that grid has finished, as `d5rl bench` does
+# there: `GRID=... SEEDS=0-2 STEPS=10000 CELLS="kitchen-randomized-mixed-state-v0:idql:16:4"` runs only the
+# missing seeds.
 # The machine needs, in the checkout (git-ignored): .gl/ (libEGL/libGL .debs), .whl/ (cp312 wheels at the lock's
 # versions), .assets/ (the extracted robot models, D5RL_ASSETS): `bash scripts/gpu_prepare.sh kitchen` (or
 # `kitchen wx`, or `wx`) makes them here and prints what will travel; optionally .dcache/<dataset>.json (this
@@ -64,6 +67,8 @@ entry() {  # TASK ALGOS GENERATE_WORKERS BENCH_WORKERS [SET,SET...]: its data (o
     esac
   done
   ( flock 9; gen $1 --workers $3 $prefix $render ) 9>$W/generate.lock  # cells on a prefix of the data need only that prefix
+  # the grid's finished cells of this task (results only; never over a cell resumed here) are skipped by bench
+  [ -n "$GRID" ] && [ -d "$GRID/$1" ] && mkdir -p $W/cells/$1 && cp -rn "$GRID/$1" $W/cells/$1/
   cli $(( $(left) - 25 )) bench --tasks $1 --algos ${2//,/ } --seeds $seeds --offline-steps $steps $B $sets --workers $4 --out $W/cells/$1 > $W/bench-$1.log 2>&1
 }
 for e in $CELLS; do IFS=: read -r t a gw bw sets <<< "$e"; entry "$t" "$a" "$gw" "$bw" "$sets" & sleep 1; done
