@@ -10,13 +10,18 @@ import pytest
 
 ROOT = Path(__file__).resolve().parents[1]
 DOCS = sorted([ROOT / "README.md", ROOT / "CHANGELOG.md", *(ROOT / "docs").rglob("*.md")])
-LINK = re.compile(r"(?<!!)\[[^\]]*\]\(([^)\s]+)\)|!\[[^\]]*\]\(([^)\s]+)\)")
+LINK = re.compile(r"!?\[[^\]]*\]\(([^)\s]+)\)")  # [text](target) and ![alt](target)
+
+
+def prose(path: Path) -> str:
+    """``path``'s text without its fenced code blocks (what they hold is neither a heading nor a link)."""
+    return re.sub(r"^```.*?^```", "", path.read_text(), flags=re.S | re.M)
 
 
 def anchors(path: Path) -> set[str]:
     """The anchors GitHub gives the headings of ``path``: lower case, punctuation dropped, spaces to hyphens,
     ``-1``, ``-2``... for repeats. Headings inside fenced code are not headings."""
-    text = re.sub(r"^```.*?^```", "", path.read_text(), flags=re.S | re.M)
+    text = prose(path)
     seen: dict[str, int] = {}
     out = set()
     for title in re.findall(r"^#{1,6}\s+(.+?)\s*#*\s*$", text, flags=re.M):
@@ -28,9 +33,7 @@ def anchors(path: Path) -> set[str]:
 
 
 def links(path: Path) -> list[str]:
-    text = re.sub(r"^```.*?^```", "", path.read_text(), flags=re.S | re.M)
-    text = re.sub(r"`[^`\n]*`", "", text)  # inline code is not a link
-    return [a or b for a, b in LINK.findall(text)]
+    return LINK.findall(re.sub(r"`[^`\n]*`", "", prose(path)))  # inline code is not a link
 
 
 def test_anchor_rules():
