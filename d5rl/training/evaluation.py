@@ -3,6 +3,8 @@
 from __future__ import annotations
 
 import functools
+import json
+import sys
 from pathlib import Path
 from typing import Any, Callable
 
@@ -10,7 +12,10 @@ import gymnasium as gym
 import jax
 import numpy as np
 
+from d5rl.files import write_atomic
 from d5rl.training.envs import env_factory, episode_scorer
+
+PROGRESS_FORMAT = 1
 
 
 def _stack_obs(obs_list):
@@ -30,6 +35,7 @@ def evaluate(
     processes: bool = False,
     video_path: str | Path | None = None,
     env_fn: Callable[[], gym.Env] | None = None,
+    progress: EvalProgress | None = None,
 ) -> dict[str, Any]:
     """Mean return, normalized score (if the task has references), success and length over episodes;
     ``stats``: the mean over episodes of each value of the final ``info["episode_stats"]``, where the
@@ -39,7 +45,9 @@ def evaluate(
     one batch; ``processes=True`` puts each in its own process (gymnasium
     ``AsyncVectorEnv``).  Episode ``i`` resets with seed ``seed + i`` and a stochastic
     policy acts in it with keys drawn from ``(seed, i, step)``, so results do not depend
-    on ``num_envs``.  ``video_path`` records the first episode.
+    on ``num_envs``.  ``video_path`` records the first episode.  ``progress`` keeps the finished
+    episodes on disk, so that an evaluation killed midway resumes at its first unfinished episode with
+    the same result (see :class:`EvalProgress`).
     """
     if int(num_episodes) < 1:
         from d5rl.errors import D5RLError
@@ -52,10 +60,18 @@ def evaluate(
     envs = [fn() for fn in fns] if not processes else None
     vec = gym.vector.AsyncVectorEnv([functools.partial(_in_worker, fn) for fn in fns], copy=True,
                                     context="spawn") if processes else None
-    returns, lengths, successes, frames = [], [], [], []
-    final_infos: list[dict] = []
+    done_before = progress.load(task_id, seed, num_episodes, frame_stack) if progress is not None else []
+    if done_before and render and not _video_file(video_path):
+        done_before = []  # the first episode's video was not written: evaluate it again
+    returns = [e["return"] for e in done_before]
+    lengths = [e["length"] for e in done_before]
+    successes = [e["success"] for e in done_before]
+    final_infos: list[dict] = [e["info"] for e in done_before]
+    frames: list[np.ndarray] = []
     key = jax.random.PRNGKey(seed)
-    ep = 0
+    ep = len(done_before)
+    if ep:
+        print(f"evaluation resumes at episode {ep + 1} of {num_episodes} ({progress.path.name})", flush=True)
     try:
         while ep < num_episodes:
             n = min(num_envs, num_episodes - ep)
@@ -96,14 +112,19 @@ def evaluate(
                         succ[j] |= bool(info.get("success", False))
                         done[j] = term or trunc
                         if done[j]:
-                            last[j] = info
+                            last[j] = _final_info(info)
                 if render and ep == 0 and not done[0]:
                     frames.append(_render(envs, vec, processes))
-            returns += list(ret)
-            lengths += list(length)
-            successes += list(succ)
+            returns += [float(x) for x in ret]
+            lengths += [int(x) for x in length]
+            successes += [bool(x) for x in succ]
             final_infos += last
             ep += n
+            if render and frames:
+                _write_video(Path(video_path), frames)
+                frames = []
+            if progress is not None and ep < num_episodes:
+                progress.save(task_id, seed, num_episodes, frame_stack, returns, lengths, successes, final_infos)
     except BaseException:
         if vec is not None:  # Ctrl-C or an error: stop the workers now, mid-step or not
             vec.close(terminate=True)
@@ -125,10 +146,50 @@ def evaluate(
         scores = np.asarray([scorer(r, info) for r, info in zip(returns, final_infos)], np.float64)
         out["score"] = float(scores.mean())
         out["score_std"] = float(scores.std())
-    if render and frames:
-        _write_video(Path(video_path), frames)
-        out["video"] = str(video_path)
+    if render and _video_file(video_path):
+        out["video"] = str(_video_file(video_path))
+    if progress is not None:
+        progress.clear()
     return out
+
+
+class EvalProgress:
+    """The finished episodes of one evaluation, in a JSON file rewritten atomically after each batch of
+    ``num_envs`` episodes.  An evaluation resumes from it only when it is the same evaluation: the same
+    task, seed, episode count and frame stack, and the same ``identity`` (the training loop: the step and
+    a hash of the agent's arrays); otherwise, or when the file is damaged, it starts at episode 1.  Each
+    episode's result does not depend on which episodes ran beside it or before it, so a resumed evaluation
+    returns the same numbers as an unbroken one.  The file is removed when the evaluation finishes."""
+
+    def __init__(self, path: str | Path, identity: dict[str, Any]):
+        self.path, self.identity = Path(path), dict(identity)
+
+    def _header(self, task_id, seed, num_episodes, frame_stack) -> dict[str, Any]:
+        return {"format": PROGRESS_FORMAT, "task_id": task_id, "seed": int(seed), "num_episodes": int(num_episodes),
+                "frame_stack": int(frame_stack), **self.identity}
+
+    def load(self, task_id, seed, num_episodes, frame_stack) -> list[dict]:
+        if not self.path.exists():
+            return []
+        try:
+            data = json.loads(self.path.read_text())
+            episodes = data["episodes"]
+            ok = data["evaluation"] == self._header(task_id, seed, num_episodes, frame_stack)
+            ok = ok and all(set(e) == {"return", "length", "success", "info"} for e in episodes)
+        except (OSError, ValueError, KeyError, TypeError) as e:
+            print(f"warning: {self.path} is damaged ({type(e).__name__}); the evaluation starts at episode 1",
+                  file=sys.stderr, flush=True)
+            return []
+        return episodes[:num_episodes] if ok else []
+
+    def save(self, task_id, seed, num_episodes, frame_stack, returns, lengths, successes, infos) -> None:
+        episodes = [{"return": r, "length": n, "success": s, "info": i}
+                    for r, n, s, i in zip(returns, lengths, successes, infos)]
+        data = {"evaluation": self._header(task_id, seed, num_episodes, frame_stack), "episodes": episodes}
+        write_atomic(self.path, json.dumps(data) + "\n")
+
+    def clear(self) -> None:
+        self.path.unlink(missing_ok=True)
 
 
 @jax.jit
@@ -138,14 +199,24 @@ def _step_keys(key, episodes, steps):
     return jax.vmap(lambda e, t: jax.random.fold_in(jax.random.fold_in(key, e), t))(episodes, steps)
 
 
-def _unbatch_info(info: dict, j: int) -> dict:
-    """Environment ``j``'s part of a vector env's info (``score`` and ``episode_stats``, which evaluation reads)."""
+def _final_info(info: dict) -> dict:
+    """What evaluation reads from an episode's last info (``score`` and ``episode_stats``), as plain floats."""
     out: dict[str, Any] = {}
     if "score" in info:
-        out["score"] = float(info["score"][j])
+        out["score"] = float(info["score"])
     if "episode_stats" in info:
-        out["episode_stats"] = {k: float(v[j]) for k, v in info["episode_stats"].items() if not k.startswith("_")}
+        out["episode_stats"] = {k: float(v) for k, v in info["episode_stats"].items() if not k.startswith("_")}
     return out
+
+
+def _unbatch_info(info: dict, j: int) -> dict:
+    """Environment ``j``'s part of a vector env's info, as :func:`_final_info` keeps it."""
+    out: dict[str, Any] = {}
+    if "score" in info:
+        out["score"] = info["score"][j]
+    if "episode_stats" in info:
+        out["episode_stats"] = {k: v[j] for k, v in info["episode_stats"].items() if not k.startswith("_")}
+    return _final_info(out)
 
 
 def _in_worker(make_env: Callable[[], gym.Env]) -> gym.Env:
@@ -168,12 +239,32 @@ def _render(envs, vec, processes):
     return np.asarray(envs[0].render())
 
 
-def _write_video(path: Path, frames) -> None:
-    import imageio
+def _video_file(path: str | Path | None) -> Path | None:
+    """The video :func:`_write_video` wrote for ``path`` (an MP4, or a GIF without ffmpeg), if it exists."""
+    if path is None:
+        return None
+    return next((p for p in (Path(path), Path(path).with_suffix(".gif")) if p.exists()), None)
 
+
+def _write_video(path: Path, frames) -> None:
     path.parent.mkdir(parents=True, exist_ok=True)
     fps = 20
     try:
-        imageio.mimwrite(str(path), frames, fps=fps, macro_block_size=1)
+        _mimwrite_atomic(path, frames, fps=fps, macro_block_size=1)
     except Exception:  # noqa: BLE001 - no ffmpeg: fall back to GIF
-        imageio.mimwrite(str(path.with_suffix(".gif")), frames, duration=1000 / fps)
+        _mimwrite_atomic(path.with_suffix(".gif"), frames, duration=1000 / fps)
+
+
+def _mimwrite_atomic(path: Path, frames, **kw) -> None:
+    """Write the video under a temporary name with the same suffix (imageio picks the format from it), then
+    rename it into place, so that a kill never leaves a truncated video for a resumed evaluation to trust."""
+    import os
+
+    import imageio
+
+    tmp = path.with_name(f".tmp-{path.name}")
+    try:
+        imageio.mimwrite(str(tmp), frames, **kw)
+        os.replace(tmp, path)
+    finally:
+        tmp.unlink(missing_ok=True)

@@ -6,6 +6,7 @@ from __future__ import annotations
 import collections
 import copy
 import dataclasses
+import hashlib
 import math
 import time
 from concurrent.futures import ThreadPoolExecutor
@@ -16,12 +17,13 @@ import jax
 import numpy as np
 
 from d5rl.errors import D5RLError
-from d5rl.training.evaluation import evaluate
+from d5rl.training.evaluation import EvalProgress, evaluate
 from d5rl.training.logger import Logger
 from d5rl.training.replay import ReplayBuffer
 
 BATCH_KEYS = ("observations", "actions", "rewards", "masks", "next_observations")
 FLOAT_KEYS = ("rewards", "masks", "mc_returns", "next_actions")
+EVAL_PROGRESS_FILE = "eval_progress.json"  # the episodes an unfinished evaluation has done (see EvalProgress)
 
 
 class NonFiniteLossError(D5RLError, FloatingPointError):
@@ -180,11 +182,26 @@ class Evaluator:
 
     def __call__(self, agent, step: int, episodes: int) -> dict[str, Any]:
         video = self.run_dir / "videos" / f"step{step:09d}.mp4" if self.cfg.save_video else None
+        # a kill mid-evaluation loses at most one batch of episodes: the rerun of this step's evaluation, on the
+        # same agent, resumes from the file (a 100-episode IDQL evaluation is an hour of CPU)
+        progress = EvalProgress(self.run_dir / EVAL_PROGRESS_FILE, {"step": int(step), "agent_sha256": fingerprint(agent)})
         res = evaluate(agent, self.task_id, episodes, seed=10_000 * (self.seed + 1), num_envs=self.cfg.eval_envs,
-                       frame_stack=self.frame_stack, processes=self.cfg.eval_processes, video_path=video)
+                       frame_stack=self.frame_stack, processes=self.cfg.eval_processes, video_path=video,
+                       progress=progress)
         row = {k: res[k] for k in ("return", "return_std", "length", "success", "score") if k in res}
         self.logger.log(step, {f"eval/{self.task_id}/{k}": v for k, v in {**row, **res.get("stats", {})}.items()})
         return res
+
+
+def fingerprint(agent) -> str:
+    """sha256 of the agent's arrays (dtype, shape and bytes of each leaf, in tree order).  Not of
+    ``agent.to_bytes()``: msgpack does not write a restored agent's arrays in the same bytes."""
+    h = hashlib.sha256()
+    for leaf in jax.tree_util.tree_leaves(agent):
+        a = np.ascontiguousarray(np.asarray(leaf))
+        h.update(f"{a.dtype.str}{a.shape}".encode())
+        h.update(a.tobytes())
+    return h.hexdigest()
 
 
 def crossed(prev: int, now: int, interval: int) -> bool:

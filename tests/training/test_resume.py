@@ -60,3 +60,80 @@ def test_calql_online_finetuning_runs(tmp_path):
     assert res["step"] == 46 and np.isfinite(res["return"])
 
 
+
+
+class _Counting:
+    """An agent's ``eval_actions``, counted; raises KeyboardInterrupt (a kill) at call ``kill_at``."""
+
+    def __init__(self, agent, kill_at=None):
+        self.agent, self.kill_at, self.calls = agent, kill_at, 0
+
+    def eval_actions(self, obs, seed=None):
+        self.calls += 1
+        if self.calls == self.kill_at:
+            raise KeyboardInterrupt("killed mid-evaluation")
+        return self.agent.eval_actions(obs, seed=seed)
+
+
+def test_a_killed_evaluation_resumes_at_its_first_unfinished_episode(tmp_path):
+    """toy-reach episodes last 25 steps; 6 episodes on 2 envs are 3 batches of 25 policy calls."""
+    from d5rl.training.evaluation import EvalProgress, evaluate
+    from tests.agents.helpers import make_agent
+
+    agent = make_agent("ddpm_bc", diffusion_steps=3)  # stochastic: each episode's keys must be its own
+    unbroken = evaluate(agent, "toy-reach-v0", 6, seed=3, num_envs=2)
+    path = tmp_path / "eval_progress.json"
+    with pytest.raises(KeyboardInterrupt):
+        evaluate(_Counting(agent, kill_at=60), "toy-reach-v0", 6, seed=3, num_envs=2,
+                 progress=EvalProgress(path, {"step": 7}))
+    saved = json.loads(path.read_text())
+    assert len(saved["episodes"]) == 4 and saved["evaluation"]["step"] == 7
+    again = _Counting(agent)
+    resumed = evaluate(again, "toy-reach-v0", 6, seed=3, num_envs=4, progress=EvalProgress(path, {"step": 7}))
+    assert again.calls == 25  # episodes 5 and 6 only
+    assert resumed == unbroken and not path.exists()
+
+
+@pytest.mark.parametrize("case", ["other identity", "damaged"])
+def test_an_evaluation_does_not_resume_from_another_or_a_damaged_one(tmp_path, case, capsys):
+    from d5rl.training.evaluation import EvalProgress, evaluate
+    from tests.agents.helpers import make_agent
+
+    agent = make_agent("bc")
+    path = tmp_path / "eval_progress.json"
+    with pytest.raises(KeyboardInterrupt):
+        evaluate(_Counting(agent, kill_at=30), "toy-reach-v0", 4, seed=3, num_envs=2,
+                 progress=EvalProgress(path, {"step": 7}))
+    if case == "damaged":
+        path.write_text(path.read_text()[:-20])
+    again = _Counting(agent)
+    out = evaluate(again, "toy-reach-v0", 4, seed=3, num_envs=2,
+                   progress=EvalProgress(path, {"step": 8 if case == "other identity" else 7}))
+    assert again.calls == 50 and out == evaluate(agent, "toy-reach-v0", 4, seed=3, num_envs=2)
+    assert ("is damaged" in capsys.readouterr().err) == (case == "damaged")
+
+
+def test_a_run_killed_in_its_final_evaluation_resumes_it(tmp_path, monkeypatch, capsys):
+    """The loop's evaluator names the step and a hash of the agent's arrays, which a resumed run restores."""
+    from d5rl.training.evaluation import EvalProgress
+
+    ds = toy_dataset(10)
+    kw = overrides(checkpoint_interval=16, eval_interval=1000, eval_episodes=6, eval_envs=2)
+    full = train("bc", "toy-reach-v0", 32, 0, 1, kw, tmp_path / "a", dataset=ds)
+    real_save = EvalProgress.save
+
+    def save_then_die(self, *a):
+        real_save(self, *a)
+        raise KeyboardInterrupt("killed after the evaluation's first batch")
+
+    monkeypatch.setattr(EvalProgress, "save", save_then_die)
+    with pytest.raises(KeyboardInterrupt):
+        train("bc", "toy-reach-v0", 32, 0, 1, kw, tmp_path / "b", dataset=ds)
+    assert len(json.loads((tmp_path / "b" / "eval_progress.json").read_text())["episodes"]) == 2
+    monkeypatch.setattr(EvalProgress, "save", real_save)
+    capsys.readouterr()
+    resumed = train("bc", "toy-reach-v0", 32, 0, 1, kw, tmp_path / "b", dataset=ds)
+    assert "evaluation resumes at episode 3 of 6" in capsys.readouterr().out
+    drop = ("run_dir", "run_wall_s", "resumed", "agent")
+    assert {k: v for k, v in resumed.items() if k not in drop} == {k: v for k, v in full.items() if k not in drop}
+    assert rows(tmp_path / "a") == rows(tmp_path / "b") and not (tmp_path / "b" / "eval_progress.json").exists()
