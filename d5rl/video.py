@@ -91,6 +91,17 @@ def write_video(path: str | Path, frames: Iterable[np.ndarray], fps: float) -> i
     return n
 
 
+def write_gif(path: str | Path, frames, fps: float) -> None:
+    """Write ``frames`` as a looping GIF, under a temporary name renamed into place."""
+    import imageio
+
+    path = Path(path)
+    path.parent.mkdir(parents=True, exist_ok=True)
+    tmp = path.with_name(path.name + ".tmp.gif")
+    imageio.mimwrite(str(tmp), frames, duration=1000.0 / fps, loop=0)
+    tmp.replace(path)
+
+
 def replay_frames(env, states: np.ndarray, size=None, quality: str = "fast") -> Iterable[np.ndarray]:
     """Frames of stored simulator states replayed in ``env`` (one frame per state)."""
     render = FrameRenderer(env, size, quality)

@@ -17,6 +17,8 @@ from pathlib import Path
 
 import numpy as np
 
+from d5rl.video import write_gif
+
 GIF_SIZE = (120, 160)  # (height, width) of the frames
 EVERY = 2  # keep every 2nd step: ~10 frames per second of simulated time at 20 Hz control
 
@@ -76,15 +78,6 @@ def typical_rollout(cell_dir: Path, task: str, *, episodes: int = 5, size=GIF_SI
         env.close()
     assert again == scores[seed], "evaluation episodes must replay exactly"
     return frames, float(env.unwrapped.metadata.get("render_fps", 20)) / every, seed, scores
-
-
-def write_gif(path: Path, frames, fps: float) -> None:
-    import imageio
-
-    path.parent.mkdir(parents=True, exist_ok=True)
-    tmp = path.with_name(path.name + ".tmp.gif")
-    imageio.mimwrite(str(tmp), frames, duration=1000.0 / fps, loop=0)
-    tmp.replace(path)
 
 
 def write_rollout_gifs(results, out_dir: Path, log=print) -> dict[str, str]:

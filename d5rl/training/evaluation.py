@@ -247,24 +247,11 @@ def _video_file(path: str | Path | None) -> Path | None:
 
 
 def _write_video(path: Path, frames) -> None:
-    path.parent.mkdir(parents=True, exist_ok=True)
-    fps = 20
+    """An MP4, or a GIF without ffmpeg; either is renamed into place whole, so that a kill never leaves a
+    truncated video for a resumed evaluation to trust."""
+    from d5rl.video import write_gif, write_video
+
     try:
-        _mimwrite_atomic(path, frames, fps=fps, macro_block_size=1)
+        write_video(path, frames, fps=20)
     except Exception:  # noqa: BLE001 - no ffmpeg: fall back to GIF
-        _mimwrite_atomic(path.with_suffix(".gif"), frames, duration=1000 / fps)
-
-
-def _mimwrite_atomic(path: Path, frames, **kw) -> None:
-    """Write the video under a temporary name with the same suffix (imageio picks the format from it), then
-    rename it into place, so that a kill never leaves a truncated video for a resumed evaluation to trust."""
-    import os
-
-    import imageio
-
-    tmp = path.with_name(f".tmp-{path.name}")
-    try:
-        imageio.mimwrite(str(tmp), frames, **kw)
-        os.replace(tmp, path)
-    finally:
-        tmp.unlink(missing_ok=True)
+        write_gif(path.with_suffix(".gif"), frames, fps=20)
