@@ -60,16 +60,14 @@ def evaluate(
     envs = [fn() for fn in fns] if not processes else None
     vec = gym.vector.AsyncVectorEnv([functools.partial(_in_worker, fn) for fn in fns], copy=True,
                                     context="spawn") if processes else None
-    done_before = progress.load(task_id, seed, num_episodes, frame_stack) if progress is not None else []
-    if done_before and render and not _video_file(video_path):
-        done_before = []  # the first episode's video was not written: evaluate it again
-    returns = [e["return"] for e in done_before]
-    lengths = [e["length"] for e in done_before]
-    successes = [e["success"] for e in done_before]
-    final_infos: list[dict] = [e["info"] for e in done_before]
+    evaluation = {"task_id": task_id, "seed": int(seed), "num_episodes": int(num_episodes),
+                  "frame_stack": int(frame_stack)}
+    episodes = progress.load(evaluation) if progress is not None else []  # {"return", "length", "success", "info"}
+    if episodes and render and not _video_file(video_path):
+        episodes = []  # the first episode's video was not written: evaluate it again
     frames: list[np.ndarray] = []
     key = jax.random.PRNGKey(seed)
-    ep = len(done_before)
+    ep = len(episodes)
     if ep:
         print(f"evaluation resumes at episode {ep + 1} of {num_episodes} ({progress.path.name})", flush=True)
     try:
@@ -115,16 +113,14 @@ def evaluate(
                             last[j] = _final_info(info)
                 if render and ep == 0 and not done[0]:
                     frames.append(_render(envs, vec, processes))
-            returns += [float(x) for x in ret]
-            lengths += [int(x) for x in length]
-            successes += [bool(x) for x in succ]
-            final_infos += last
+            episodes += [{"return": float(ret[j]), "length": int(length[j]), "success": bool(succ[j]), "info": last[j]}
+                         for j in range(n)]
             ep += n
             if render and frames:
                 _write_video(Path(video_path), frames)
                 frames = []
             if progress is not None and ep < num_episodes:
-                progress.save(task_id, seed, num_episodes, frame_stack, returns, lengths, successes, final_infos)
+                progress.save(evaluation, episodes)
     except BaseException:
         if vec is not None:  # Ctrl-C or an error: stop the workers now, mid-step or not
             vec.close(terminate=True)
@@ -135,15 +131,16 @@ def evaluate(
             vec.close()
         for e in envs or []:
             e.close()
+    returns = [e["return"] for e in episodes]
     out = {"return": float(np.mean(returns)), "return_std": float(np.std(returns)),
-           "length": float(np.mean(lengths)), "success": float(np.mean(successes)),
-           "episodes": len(returns), "returns": [float(x) for x in returns]}
-    stats = [info.get("episode_stats") or {} for info in final_infos]
+           "length": float(np.mean([e["length"] for e in episodes])),
+           "success": float(np.mean([e["success"] for e in episodes])), "episodes": len(episodes), "returns": returns}
+    stats = [e["info"].get("episode_stats") or {} for e in episodes]
     if any(stats):
         out["stats"] = {k: float(np.mean([st[k] for st in stats if k in st])) for k in sorted(set().union(*stats))}
     scorer = episode_scorer(task_id) if env_fn is None else None
     if scorer is not None:
-        scores = np.asarray([scorer(r, info) for r, info in zip(returns, final_infos)], np.float64)
+        scores = np.asarray([scorer(e["return"], e["info"]) for e in episodes], np.float64)
         out["score"] = float(scores.mean())
         out["score_std"] = float(scores.std())
     if render and _video_file(video_path):
@@ -156,36 +153,35 @@ def evaluate(
 class EvalProgress:
     """The finished episodes of one evaluation, in a JSON file rewritten atomically after each batch of
     ``num_envs`` episodes.  An evaluation resumes from it only when it is the same evaluation: the same
-    task, seed, episode count and frame stack, and the same ``identity`` (the training loop: the step and
-    a hash of the agent's arrays); otherwise, or when the file is damaged, it starts at episode 1.  Each
+    ``evaluation`` (task, seed, episode count and frame stack) and the same ``identity`` (the training loop:
+    the step and a hash of the agent's arrays); otherwise, or when the file is damaged, it starts at episode 1.  Each
     episode's result does not depend on which episodes ran beside it or before it, so a resumed evaluation
     returns the same numbers as an unbroken one.  The file is removed when the evaluation finishes."""
 
     def __init__(self, path: str | Path, identity: dict[str, Any]):
         self.path, self.identity = Path(path), dict(identity)
 
-    def _header(self, task_id, seed, num_episodes, frame_stack) -> dict[str, Any]:
-        return {"format": PROGRESS_FORMAT, "task_id": task_id, "seed": int(seed), "num_episodes": int(num_episodes),
-                "frame_stack": int(frame_stack), **self.identity}
+    def _header(self, evaluation: dict[str, Any]) -> dict[str, Any]:
+        return {"format": PROGRESS_FORMAT, **evaluation, **self.identity}
 
-    def load(self, task_id, seed, num_episodes, frame_stack) -> list[dict]:
+    def load(self, evaluation: dict[str, Any]) -> list[dict]:
+        """The finished episodes, each ``{"return", "length", "success", "info"}``; [] unless the file holds
+        this evaluation's."""
         if not self.path.exists():
             return []
         try:
             data = json.loads(self.path.read_text())
             episodes = data["episodes"]
-            ok = data["evaluation"] == self._header(task_id, seed, num_episodes, frame_stack)
+            ok = data["evaluation"] == self._header(evaluation)
             ok = ok and all(set(e) == {"return", "length", "success", "info"} for e in episodes)
         except (OSError, ValueError, KeyError, TypeError) as e:
             print(f"warning: {self.path} is damaged ({type(e).__name__}); the evaluation starts at episode 1",
                   file=sys.stderr, flush=True)
             return []
-        return episodes[:num_episodes] if ok else []
+        return episodes[:evaluation["num_episodes"]] if ok else []
 
-    def save(self, task_id, seed, num_episodes, frame_stack, returns, lengths, successes, infos) -> None:
-        episodes = [{"return": r, "length": n, "success": s, "info": i}
-                    for r, n, s, i in zip(returns, lengths, successes, infos)]
-        data = {"evaluation": self._header(task_id, seed, num_episodes, frame_stack), "episodes": episodes}
+    def save(self, evaluation: dict[str, Any], episodes: list[dict]) -> None:
+        data = {"evaluation": self._header(evaluation), "episodes": episodes}
         write_atomic(self.path, json.dumps(data) + "\n")
 
     def clear(self) -> None:

@@ -184,7 +184,8 @@ class Evaluator:
         video = self.run_dir / "videos" / f"step{step:09d}.mp4" if self.cfg.save_video else None
         # a kill mid-evaluation loses at most one batch of episodes: the rerun of this step's evaluation, on the
         # same agent, resumes from the file (a 100-episode IDQL evaluation is an hour of CPU)
-        progress = EvalProgress(self.run_dir / EVAL_PROGRESS_FILE, {"step": int(step), "agent_sha256": fingerprint(agent)})
+        progress = EvalProgress(self.run_dir / EVAL_PROGRESS_FILE,
+                                {"step": int(step), "agent_sha256": fingerprint(agent)})
         res = evaluate(agent, self.task_id, episodes, seed=10_000 * (self.seed + 1), num_envs=self.cfg.eval_envs,
                        frame_stack=self.frame_stack, processes=self.cfg.eval_processes, video_path=video,
                        progress=progress)
