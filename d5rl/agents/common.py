@@ -213,16 +213,24 @@ def sac_train_states(config: Config, keys, ex_obs, ex_act, critic_dropout: float
     """``(actor, critic, temperature)`` train states of a SAC-style agent (CQL, CalQL, RLPD): a tanh-squashed
     Gaussian policy, a critic ensemble and the entropy temperature, from three keys."""
     from d5rl.agents.encoders import make_encoder
-    from d5rl.agents.networks import Critic, GaussianPolicy, Temperature
+    from d5rl.agents.networks import GaussianPolicy, Temperature
 
     k_actor, k_critic, k_temp = keys
     actor_def = GaussianPolicy(make_encoder(config), config.hidden_dims, ex_act.shape[-1], tanh_squash=True,
                                log_std_min=config.log_std_min, log_std_max=config.log_std_max)
-    critic_def = Critic(make_encoder(config), config.hidden_dims, config.num_qs, config.critic_layer_norm,
-                        critic_dropout)
+    critic_def = sac_critic(config, critic_dropout)
     return (make_train_state(actor_def, k_actor, (ex_obs,), config.actor_lr),
             make_train_state(critic_def, k_critic, (ex_obs, ex_act), config.critic_lr),
             make_train_state(Temperature(config.init_temperature), k_temp, (), config.temp_lr))
+
+
+def sac_critic(config: Config, critic_dropout: float | None = None, num_qs: int | None = None):
+    """The critic ensemble module of :func:`sac_train_states` (``num_qs`` members; default ``config.num_qs``)."""
+    from d5rl.agents.encoders import make_encoder
+    from d5rl.agents.networks import Critic
+
+    return Critic(make_encoder(config), config.hidden_dims, config.num_qs if num_qs is None else num_qs,
+                  config.critic_layer_norm, critic_dropout)
 
 
 def split_utd(batch, utd: int):

@@ -62,6 +62,14 @@ class Ensemble(nn.Module):
         return out[..., 0]
 
 
+def ensemble_members(critic_params, index):
+    """A :class:`Critic`'s params with only the ensemble members ``index`` (each head leaf is stacked on axis
+    0; the shared encoder is kept whole): apply them with a ``Critic`` of ``num_qs=len(index)``."""
+    params = dict(critic_params)
+    params["heads"] = jax.tree_util.tree_map(lambda p: p[index], params["heads"])
+    return params
+
+
 class Critic(nn.Module):
     """Q(s, a) ensemble sharing one observation encoder: returns ``(num_qs, batch)``.
 

@@ -21,10 +21,10 @@ import numpy as np
 
 from d5rl.agents.augment import augment_batch
 from d5rl.agents.common import (ENCODER_DEFAULTS, Agent, copy_tree, nonpytree_field, obs_ndims, prepare_example,
-                                sac_train_states, split_utd)
+                                sac_critic, sac_train_states, split_utd)
 from d5rl.agents.config import Config
 from d5rl.agents.encoders import is_pixel_obs
-from d5rl.agents.networks import soft_update
+from d5rl.agents.networks import ensemble_members, soft_update
 
 
 class RLPDAgent(Agent):
@@ -36,15 +36,14 @@ class RLPDAgent(Agent):
     temp: Any
     config: Config = nonpytree_field()
     obs_ndim: tuple = nonpytree_field()
+    subset_critic_apply: Any = nonpytree_field()  # the critic's module with num_min_qs members
 
     # --- losses ----------------------------------------------------------------------------------
     def critic_loss(self, critic_params, batch, key):
         k_act, k_sub, k_drop = jax.random.split(key, 3)
         dist = self.actor.apply_fn({"params": self.actor.params}, batch["next_observations"])
         next_actions, next_logp = dist.sample_and_log_prob(k_act)
-        target_qs = self.critic.apply_fn({"params": self.target_critic_params}, batch["next_observations"], next_actions)
-        subset = jax.random.choice(k_sub, self.config.num_qs, (self.config.num_min_qs,), replace=False)
-        next_q = target_qs[subset].min(axis=0)
+        next_q = self._target_q(batch["next_observations"], next_actions, k_sub)
         gamma = self.config.discount
         target = batch["rewards"] + gamma * batch["masks"] * next_q
         if self.config.backup_entropy:
@@ -55,6 +54,16 @@ class RLPDAgent(Agent):
                                   rngs={"dropout": k_drop})
         loss = ((qs - target[None]) ** 2).mean()
         return loss, {"critic/loss": loss, "critic/q": qs.mean(), "critic/target_q": target.mean()}
+
+    def _target_q(self, observations, actions, key):
+        """min over a random subset of ``num_min_qs`` target critics; only those critics are evaluated (the
+        same numbers as evaluating all ``num_qs`` and indexing, ~1.2x faster updates with RLPD's 10 and 2)."""
+        num_qs, num_min = self.config.num_qs, self.config.num_min_qs
+        if num_min >= num_qs:
+            return self.critic.apply_fn({"params": self.target_critic_params}, observations, actions).min(axis=0)
+        subset = jax.random.choice(key, num_qs, (num_min,), replace=False)
+        params = ensemble_members(self.target_critic_params, subset)
+        return self.subset_critic_apply({"params": params}, observations, actions).min(axis=0)
 
     def actor_loss(self, actor_params, batch, key):
         k_act, k_drop = jax.random.split(key)
@@ -140,8 +149,9 @@ class RLPDAgent(Agent):
             config = config.replace(target_entropy=-action_dim / 2)
         rng, *keys = jax.random.split(jax.random.PRNGKey(seed), 4)
         actor, critic, temp = sac_train_states(config, keys, ex_obs, ex_act, config.critic_dropout)
+        subset_critic = sac_critic(config, config.critic_dropout, num_qs=min(config.num_min_qs, config.num_qs))
         return cls(rng=rng, actor=actor, critic=critic, target_critic_params=copy_tree(critic.params), temp=temp,
-                   config=config, obs_ndim=obs_ndims(ex_obs))
+                   config=config, obs_ndim=obs_ndims(ex_obs), subset_critic_apply=subset_critic.apply)
 
 
 def get_config() -> Config:

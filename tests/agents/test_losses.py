@@ -272,14 +272,16 @@ def test_fql_losses():
 
 
 # --- RLPD ---------------------------------------------------------------------------------------------------
-def test_rlpd_critic_loss_uses_a_random_subset_of_layernorm_critics():
-    agent, b = make("rlpd", num_qs=4, num_min_qs=2, discount=0.9, backup_entropy=True), batch()
+@pytest.mark.parametrize("num_qs, num_min_qs", [(4, 2), (3, 3)])  # (3, 3): every critic, the A1 experts' setting
+def test_rlpd_critic_loss_uses_a_random_subset_of_layernorm_critics(num_qs, num_min_qs):
+    agent = make("rlpd", num_qs=num_qs, num_min_qs=num_min_qs, discount=0.9, backup_entropy=True)
+    b = batch()
     key = jax.random.PRNGKey(6)
     loss, _ = agent.critic_loss(agent.critic.params, b, key)
     k_act, k_sub, _ = jax.random.split(key, 3)
     loc, ls = gaussian(agent.actor.params, b["next_observations"], agent.config, tanh_squash=True)
     a_next, logp = tanh_sample(loc, ls, np.asarray(jax.random.normal(k_act, (B, ACT)), np.float64))
-    subset = np.asarray(jax.random.choice(k_sub, 4, (2,), replace=False))
+    subset = np.asarray(jax.random.choice(k_sub, num_qs, (num_min_qs,), replace=False))
     target_qs = critic(agent.target_critic_params, b["next_observations"], a_next, ln=True)
     alpha = float(agent.temp.apply_fn({"params": agent.temp.params}))
     target = b["rewards"] + 0.9 * b["masks"] * (target_qs[subset].min(0) - alpha * logp)
