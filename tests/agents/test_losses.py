@@ -272,7 +272,8 @@ def test_fql_losses():
 
 
 # --- RLPD ---------------------------------------------------------------------------------------------------
-@pytest.mark.parametrize("num_qs, num_min_qs", [(4, 2), (3, 3)])  # (3, 3): every critic, the A1 experts' setting
+# (3, 3): every critic, as for the A1 data agents' (2, 2)
+@pytest.mark.parametrize("num_qs, num_min_qs", [(4, 2), (3, 3)])
 def test_rlpd_critic_loss_uses_a_random_subset_of_layernorm_critics(num_qs, num_min_qs):
     agent = make("rlpd", num_qs=num_qs, num_min_qs=num_min_qs, discount=0.9, backup_entropy=True)
     b = batch()
