@@ -36,7 +36,6 @@ class RLPDAgent(Agent):
     temp: Any
     config: Config = nonpytree_field()
     obs_ndim: tuple = nonpytree_field()
-    subset_critic_apply: Any = nonpytree_field()  # the critic's module with num_min_qs members
 
     # --- losses ----------------------------------------------------------------------------------
     def critic_loss(self, critic_params, batch, key):
@@ -63,7 +62,8 @@ class RLPDAgent(Agent):
             return self.critic.apply_fn({"params": self.target_critic_params}, observations, actions).min(axis=0)
         subset = jax.random.choice(key, num_qs, (num_min,), replace=False)
         params = ensemble_members(self.target_critic_params, subset)
-        return self.subset_critic_apply({"params": params}, observations, actions).min(axis=0)
+        subset_critic = sac_critic(self.config, self.config.critic_dropout, num_qs=num_min)  # built when traced
+        return subset_critic.apply({"params": params}, observations, actions).min(axis=0)
 
     def actor_loss(self, actor_params, batch, key):
         k_act, k_drop = jax.random.split(key)
@@ -149,9 +149,8 @@ class RLPDAgent(Agent):
             config = config.replace(target_entropy=-action_dim / 2)
         rng, *keys = jax.random.split(jax.random.PRNGKey(seed), 4)
         actor, critic, temp = sac_train_states(config, keys, ex_obs, ex_act, config.critic_dropout)
-        subset_critic = sac_critic(config, config.critic_dropout, num_qs=min(config.num_min_qs, config.num_qs))
         return cls(rng=rng, actor=actor, critic=critic, target_critic_params=copy_tree(critic.params), temp=temp,
-                   config=config, obs_ndim=obs_ndims(ex_obs), subset_critic_apply=subset_critic.apply)
+                   config=config, obs_ndim=obs_ndims(ex_obs))
 
 
 def get_config() -> Config:
