@@ -184,6 +184,7 @@ def _open(spec, dspec, seed, root, wanted, partial, in_memory, limit, obs_keys, 
     if spec.relabel is not None:
         arrays.update(resolve(spec.relabel)(spec, arrays))
     metadata = {**{k: v for k, v in manifest.items() if k != "shards"}, "task_id": spec.id, "root": str(root)}
-    if obs_keys is None and spec.observation == "state":
+    if obs_keys is None and spec.observation == "state" and "observations" in arrays:
         obs_keys = ["observations"]  # a "-state" twin of a camera task: the flat state vector only
+        # (without its cache, render=False: the stored observations, as for its camera task)
     return Dataset(arrays, aligns, lengths, meta, metadata, obs_keys=obs_keys)

@@ -3,10 +3,13 @@ relabelling, rendered frames from stored states, and the D4RL importer."""
 
 from __future__ import annotations
 
+from pathlib import Path
+
 import numpy as np
 import pytest
 
 import d5rl
+from d5rl.cli import main
 from d5rl.datasets.loading import load_dataset
 from d5rl.envs.base import qpos_of_states
 from d5rl.envs.kitchen import data as kdata
@@ -35,7 +38,7 @@ def test_generator_is_a_pure_function_of_index_and_rng():
     assert a.arrays["actions"].tobytes() != c.arrays["actions"].tobytes()
 
 
-def test_dataset_round_trip_relabel_and_renders(monkeypatch):
+def test_dataset_round_trip_relabel_and_renders(monkeypatch, tmp_path):
     ds = load_dataset("kitchen-standard-mixed-v0", episodes=2, workers=1, progress=False, render=False)
     assert ds.num_episodes == 2 and ds.episode_meta[0]["subtasks"] == list(COMBINATIONS[0])
     assert ds.arrays["states"].shape[0] == ds.num_transitions + 2
@@ -59,6 +62,12 @@ def test_dataset_round_trip_relabel_and_renders(monkeypatch):
         r = relabel(spec, ds.arrays)["rewards"]
         cols = [SUBTASK_NAMES.index(t) for t in tasks]
         np.testing.assert_array_equal(r, done[:, cols].sum(1))
+    # a -state task with render=False: states only, no cache built (what `d5rl render --episode` reads)
+    twin = load_dataset("kitchen-standard-mixed-state-v0", episodes=2, progress=False, render=False)
+    np.testing.assert_array_equal(twin.arrays["states"], ds.arrays["states"])
+    assert "observations" not in twin.arrays and not (Path(twin.metadata["root"]) / "renders" / "state").exists()
+    assert main(["render", "kitchen-standard-mixed-state-v0", "--episode", "1", "--steps", "2", "--size", "16x16",
+                 "--out", str(tmp_path / "ep.mp4"), "--no-progress"]) == 0
     partial = load_dataset("kitchen-standard-partial-v0", episodes=2, workers=1, progress=False, render=False)
     assert not np.array_equal(partial.rewards, ds.rewards)
     assert partial.rewards.max() <= 3  # never all four partial subtasks in one episode
