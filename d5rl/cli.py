@@ -48,7 +48,7 @@ def cmd_info(args) -> int:
         print(f"                random = {s.score.random:.3f}, expert = {s.score.expert:.3f}  ({s.score.source})")
         if s.score.expert_note:
             print(f"                the expert: {s.score.expert_note}")
-    else:
+    elif s.score_from == "return":
         print("                reference returns not computed yet")
     if s.dataset is None:
         return 0

@@ -124,3 +124,10 @@ def test_a_closed_pipe_ends_quietly(monkeypatch, capsys):
     monkeypatch.setattr(sys, "stdout", Closed())
     assert main(["list"]) == 141
     assert capsys.readouterr().err == ""
+
+
+def test_info_of_a_subtask_scored_task_does_not_ask_for_reference_returns(capsys):
+    # kitchen and WidowX score from info["score"]; they have no return references and need none
+    assert main(["info", "wx-sorting-state-v0"]) == 0
+    out = capsys.readouterr().out
+    assert "fraction" in out and "reference returns" not in out
