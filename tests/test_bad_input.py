@@ -105,6 +105,19 @@ def test_eval_episodes(capsys, tmp_path):
     one_line_error(capsys, ["eval", str(tmp_path), "--episodes", "0"], "--episodes must be at least 1")
 
 
+def test_eval_on_a_task_with_other_spaces(capsys, tmp_path):
+    from d5rl.envs.toy.data import toy_dataset
+    from d5rl.training.loop import train
+
+    run = tmp_path / "run"
+    train("bc", "toy-reach-v0", 8, 0, 0, ["hidden_dims=8", "batch_size=8", "eval_episodes=1", "eval_envs=1",
+                                          "progress=false", "tensorboard=false", "checkpoint_interval=8"],
+          run, dataset=toy_dataset(4))
+    one_line_error(capsys, ["eval", str(run), "--task", "toy-reach-pixels-v0"],
+                   "trained on toy-reach-v0, whose observation space", "`d5rl info TASK`")
+    one_line_error(capsys, ["eval", str(run), "--task", "toy-reach-v1"], "'toy-reach-v1'")
+
+
 def test_calibrate_episodes(capsys):
     one_line_error(capsys, ["calibrate", "a1-walk-v0", "--episodes", "0"], "--episodes must be at least 1")
 

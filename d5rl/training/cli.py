@@ -75,6 +75,8 @@ def cmd_eval(args) -> int:
             raise ConfigError(f"{name} must be at least 1, got {v}", f"pass e.g. {name} 10")
     agent, resolved = load_run(args.run_dir)
     task = args.task or resolved["task_id"]
+    if task != resolved["task_id"]:
+        _check_same_spaces(resolved["task_id"], task)
     res = evaluate(agent, task, args.episodes, args.seed, num_envs=args.envs,
                    frame_stack=resolved["train"]["frame_stack"], processes=args.processes, video_path=args.video)
     res.pop("returns", None)
@@ -91,3 +93,23 @@ def cmd_eval(args) -> int:
     else:
         print(f"mean return: {res['return']:.2f} (this task has no score reference)")
     return 0
+
+
+def _check_same_spaces(trained_on: str, task: str) -> None:
+    """An agent runs on another task only if that task has the same observation and action spaces."""
+    from d5rl.errors import D5RLError
+    from d5rl.registry import get_spec, make_env
+
+    spaces = {}
+    for tid in (trained_on, task):
+        env = make_env(get_spec(tid).id)
+        spaces[tid] = (env.observation_space, env.action_space)
+        env.close()
+    for i, what in enumerate(("observation", "action")):
+        a, b = spaces[trained_on][i], spaces[task][i]
+        if a != b:
+            raise D5RLError(
+                f"the agent was trained on {trained_on}, whose {what} space {a} differs from {task}'s {b}",
+                "pass a --task whose spaces match (`d5rl info TASK` prints them)",
+            )
+
