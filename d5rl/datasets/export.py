@@ -14,6 +14,7 @@ Minari's own root (``$MINARI_DATASETS_PATH``, else ``~/.minari/datasets``) and l
 
 from __future__ import annotations
 
+import warnings
 from pathlib import Path
 
 import gymnasium as gym
@@ -119,22 +120,25 @@ def export_minari(task: str, *, dataset_id: str | None = None, seed: int | None 
             terminations=a["terminals"], truncations=a["timeouts"],
         ))
     try:
-        md = minari.create_dataset_from_buffers(
-            dataset_id=dataset_id,
-            buffer=buffers,
-            env=env_spec,
-            algorithm_name=ds.metadata.get("generator"),
-            author="d5rl",
-            code_permalink="https://pypi.org/project/d5rl/",
-            observation_space=obs_space,
-            action_space=act_space,
-            ref_min_score=None if spec.score is None else spec.score.random,
-            ref_max_score=None if spec.score is None else spec.score.expert,
-            description=f"{spec.id}: {spec.description} (d5rl dataset {ds.metadata.get('dataset')} "
-                        f"v{ds.metadata.get('dataset_version')}, seed {ds.metadata.get('seed')}; Dict keys use "
-                        f"'{SEP}' for '/')",
-            jpeg_encoding=False,
-        )
+        with warnings.catch_warnings():  # d5rl has no contact address to give; everything else is filled in
+            warnings.filterwarnings("ignore", message="`author_email` is set to None", category=UserWarning)
+            md = minari.create_dataset_from_buffers(
+                dataset_id=dataset_id,
+                buffer=buffers,
+                env=env_spec,
+                eval_env=env_spec,
+                algorithm_name=ds.metadata.get("generator"),
+                author="d5rl",
+                code_permalink="https://pypi.org/project/d5rl/",
+                observation_space=obs_space,
+                action_space=act_space,
+                ref_min_score=None if spec.score is None else spec.score.random,
+                ref_max_score=None if spec.score is None else spec.score.expert,
+                description=f"{spec.id}: {spec.description} (d5rl dataset {ds.metadata.get('dataset')} "
+                            f"v{ds.metadata.get('dataset_version')}, seed {ds.metadata.get('seed')}; Dict keys use "
+                            f"'{SEP}' for '/')",
+                jpeg_encoding=False,
+            )
     except ValueError as e:
         raise D5RLError(f"Minari refused the export: {e}",
                         "pass another --dataset-id, or delete the existing Minari dataset") from e

@@ -12,7 +12,11 @@ def test_minari_round_trip(tmp_path, monkeypatch):
     monkeypatch.setenv("MINARI_DATASETS_PATH", str(tmp_path / "minari"))
     spec = register_toy("minari", num_episodes=5, per_shard=2)
     ds = load_dataset(spec, progress=False)
-    export_minari(spec.id, dataset_id="d5rltest/toy-v0", progress=False)
+    import warnings
+
+    with warnings.catch_warnings():
+        warnings.simplefilter("error")  # every metadata field minari asks for is given: no warning to read
+        export_minari(spec.id, dataset_id="d5rltest/toy-v0", progress=False)
     md = minari.load_dataset("d5rltest/toy-v0")
     assert md.total_episodes == 5 and md.total_steps == ds.num_transitions
     for i, ep in enumerate(md.iterate_episodes()):
