@@ -47,7 +47,7 @@ def check_seed(seed) -> int:
     """A dataset seed, checked before any work: an integer in [0, 2**63)."""
     if isinstance(seed, bool) or not isinstance(seed, (int, np.integer)) or not 0 <= int(seed) <= MAX_SEED:
         raise D5RLError(f"dataset seed must be an integer in [0, 2**63), got {seed!r}",
-                        "omit --seed to use the task's default seed (0)")
+                        "omit --seed (seed= in Python) to use the task's default seed (0)")
     return int(seed)
 
 
@@ -58,7 +58,8 @@ def check_episodes(episodes, dspec: DatasetSpec) -> int:
     if isinstance(episodes, bool) or not isinstance(episodes, (int, np.integer)) \
             or not 1 <= int(episodes) <= dspec.num_episodes:
         raise D5RLError(f"{dspec.name} has {dspec.num_episodes} episodes; {episodes!r} were asked for",
-                        f"ask for 1 to {dspec.num_episodes} episodes (omit --episodes for all of them)")
+                        f"ask for 1 to {dspec.num_episodes} episodes "
+                        "(omit --episodes, or episodes= in Python, for all of them)")
     return int(episodes)
 
 
