@@ -31,6 +31,10 @@ class DatasetNotFoundError(D5RLError, FileNotFoundError):
     """The dataset has not been generated (or not with enough episodes)."""
 
 
+class DatasetArgumentError(D5RLError, TypeError):
+    """A keyword argument that a task's dataset does not take."""
+
+
 class DatasetCorruptError(D5RLError):
     """A dataset file is missing, truncated or fails its checksum."""
 

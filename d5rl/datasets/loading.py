@@ -14,7 +14,7 @@ import numpy as np
 from d5rl.datasets import format as fmt
 from d5rl.datasets import lock
 from d5rl.datasets.dataset import ChunkedArray, Dataset
-from d5rl.errors import D5RLError, DatasetCorruptError, DatasetNotFoundError
+from d5rl.errors import D5RLError, DatasetArgumentError, DatasetCorruptError, DatasetNotFoundError
 from d5rl.registry import TaskSpec, get_spec, resolve
 
 # Arrays at most this large are read into RAM by default (fast sampling);
@@ -91,6 +91,7 @@ def load_dataset(
     dspec = generation.dataset_spec(spec)
     seed = generation.check_seed(dspec.default_seed if seed is None else seed)
     wanted = generation.check_episodes(episodes, dspec)
+    _check_derived_kwargs(spec, dspec, derived_kwargs)
     root = generation.dataset_root(dspec, seed)
     limit = IN_MEMORY_LIMIT_BYTES if memory_limit_bytes is None else int(memory_limit_bytes)
     if limit < 0:
@@ -110,6 +111,30 @@ def load_dataset(
     raise AssertionError("unreachable")
 
 
+_LOAD_KEYWORDS = ("seed", "episodes", "generate", "in_memory", "memory_limit_bytes", "obs_keys", "workers",
+                  "progress")
+
+
+def _check_derived_kwargs(spec: TaskSpec, dspec, kwargs: dict) -> None:
+    """Refuse keyword arguments that the dataset's derived-cache builder does not take, before any
+    generation (otherwise a typo would surface only after the dataset was generated)."""
+    import difflib
+    import inspect
+
+    if not kwargs:
+        return
+    takes = [] if dspec.derived is None else [
+        name for name, p in inspect.signature(resolve(dspec.derived)).parameters.items()
+        if p.kind is p.KEYWORD_ONLY and name not in ("episodes", "workers", "progress")]
+    unknown = sorted(set(kwargs) - set(takes))
+    if unknown:
+        near = [m for u in unknown for m in difflib.get_close_matches(u, takes + list(_LOAD_KEYWORDS), n=1)]
+        raise DatasetArgumentError(
+            f"{spec.id}'s dataset takes no argument {', '.join(map(repr, unknown))}",
+            (f"did you mean {', '.join(map(repr, near))}? " if near else "")
+            + f"it takes {', '.join(_LOAD_KEYWORDS + tuple(takes))}")
+
+
 def _open(spec, dspec, seed, root, wanted, partial, in_memory, limit, obs_keys, workers, progress, derived_kwargs):
     from d5rl.datasets import generation
 
@@ -123,8 +148,6 @@ def _open(spec, dspec, seed, root, wanted, partial, in_memory, limit, obs_keys, 
     if dspec.derived is not None:  # build missing caches first (may write; takes the write lock)
         extra_roots = resolve(dspec.derived)(spec, root, fmt.read_manifest(manifest_path), episodes=n,
                                              workers=workers, progress=progress, **derived_kwargs)
-    elif derived_kwargs:
-        raise TypeError(f"unexpected arguments for {spec.id}'s dataset: {sorted(derived_kwargs)}")
     else:
         extra_roots = []
     with lock.reading(root):  # the manifest and the shards below belong together

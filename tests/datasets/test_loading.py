@@ -123,3 +123,15 @@ def test_next_actions_stay_within_the_episode():
     b = ds.sample(4, np.random.default_rng(0), next_actions=True, indices=idx)
     acts = np.asarray(ds.actions)
     np.testing.assert_array_equal(b["next_actions"], acts[[1, last[0], last[0] + 2, last[2]]])
+
+
+def test_a_misspelt_dataset_argument_is_refused_before_generating():
+    from d5rl.datasets.generation import dataset_root
+    from d5rl.errors import DatasetArgumentError
+
+    spec = register_toy("kwargs", num_episodes=4, per_shard=2)
+    with pytest.raises(DatasetArgumentError, match=r"takes no argument 'episods' .*did you mean 'episodes'") as e:
+        load_dataset(spec, episods=2, progress=False)
+    assert isinstance(e.value, TypeError) and not dataset_root(spec.dataset).exists()  # nothing generated
+    with pytest.raises(TypeError, match="did you mean 'cameras'.* cameras, size, render"):
+        load_dataset("kitchen-standard-mixed-v0", camera=["wrist"], progress=False)
