@@ -31,8 +31,8 @@ class DatasetNotFoundError(D5RLError, FileNotFoundError):
     """The dataset has not been generated (or not with enough episodes)."""
 
 
-class DatasetArgumentError(D5RLError, TypeError):
-    """A keyword argument that a task's dataset does not take."""
+class DatasetArgumentError(D5RLError, TypeError, ValueError):
+    """A keyword argument that a task's dataset does not take, or a value it cannot use."""
 
 
 class DatasetCorruptError(D5RLError):

@@ -116,16 +116,17 @@ _LOAD_KEYWORDS = ("seed", "episodes", "generate", "in_memory", "memory_limit_byt
 
 
 def _check_derived_kwargs(spec: TaskSpec, dspec, kwargs: dict) -> None:
-    """Refuse keyword arguments that the dataset's derived-cache builder does not take, before any
-    generation (otherwise a typo would surface only after the dataset was generated)."""
+    """Refuse keyword arguments that the dataset's derived-cache builder does not take, or values it
+    cannot use, before any generation (else a typo would surface only after generating the dataset)."""
     import difflib
     import inspect
 
     if not kwargs:
         return
-    takes = [] if dspec.derived is None else [
-        name for name, p in inspect.signature(resolve(dspec.derived)).parameters.items()
-        if p.kind is p.KEYWORD_ONLY and name not in ("episodes", "workers", "progress")]
+    builder = None if dspec.derived is None else resolve(dspec.derived)
+    params = {} if builder is None else inspect.signature(builder).parameters
+    takes = [name for name, p in params.items()
+             if p.kind is p.KEYWORD_ONLY and name not in ("episodes", "workers", "progress", "check")]
     unknown = sorted(set(kwargs) - set(takes))
     if unknown:
         near = [m for u in unknown for m in difflib.get_close_matches(u, takes + list(_LOAD_KEYWORDS), n=1)]
@@ -133,6 +134,8 @@ def _check_derived_kwargs(spec: TaskSpec, dspec, kwargs: dict) -> None:
             f"{spec.id}'s dataset takes no argument {', '.join(map(repr, unknown))}",
             (f"did you mean {', '.join(map(repr, near))}? " if near else "")
             + f"it takes {', '.join(_LOAD_KEYWORDS + tuple(takes))}")
+    if "check" in params:  # a builder that can check its values without work (d5rl's own do)
+        builder(spec, None, None, episodes=0, check=True, **kwargs)
 
 
 def _open(spec, dspec, seed, root, wanted, partial, in_memory, limit, obs_keys, workers, progress, derived_kwargs):

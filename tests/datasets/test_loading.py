@@ -1,3 +1,5 @@
+import re
+
 import numpy as np
 import pytest
 
@@ -135,3 +137,20 @@ def test_a_misspelt_dataset_argument_is_refused_before_generating():
     assert isinstance(e.value, TypeError) and not dataset_root(spec.dataset).exists()  # nothing generated
     with pytest.raises(TypeError, match="did you mean 'cameras'.* cameras, size, render"):
         load_dataset("kitchen-standard-mixed-v0", camera=["wrist"], progress=False)
+
+
+@pytest.mark.parametrize("task, kwargs, needle", [
+    ("kitchen-standard-mixed-v0", {"cameras": "wrist"}, "cameras must be a list of distinct names from ['overview'"),
+    ("kitchen-randomized-demos-v0", {"cameras": ["overview"]}, "from ['left', 'right', 'wrist'], got ['overview']"),
+    ("kitchen-randomized-demos-v0", {"cameras": ["left", "left"]}, "distinct"),
+    ("wx-sorting-v0", {"size": 100_000}, "size must be an integer number of pixels from 8 to 1024, got 100000"),
+    ("wx-sorting-v0", {"size": 0}, "got 0"),
+])
+def test_a_bad_render_argument_is_refused_before_any_work(task, kwargs, needle, monkeypatch):
+    from d5rl.datasets import generation
+    from d5rl.errors import DatasetArgumentError
+
+    monkeypatch.setattr(generation, "generate", lambda *a, **k: pytest.fail("generated before checking"))
+    with pytest.raises(DatasetArgumentError, match=re.escape(needle)) as e:
+        load_dataset(task, episodes=1, progress=False, **kwargs)
+    assert isinstance(e.value, ValueError)

@@ -85,6 +85,7 @@ def import_file(path: str | Path, out: str | Path | None = None, *, task: str = 
         raise D5RLError(f"no such file: {path}", "pass the path of a D4RL kitchen .hdf5 file")
     if task not in TASKS:
         raise D5RLError(f"unknown task {task!r}", f"choose one of {sorted(TASKS)}")
+    renders(None, None, None, episodes=0, cameras=cameras, size=size, check=True)  # before replaying the file
     root = Path(out).expanduser() if out else paths.datasets_dir() / NAME / path.stem
     model = km.build_model()
     checker = CompletionChecker(model)

@@ -173,14 +173,17 @@ def render_episode(arrays: dict, meta: dict, cameras: Sequence[str] = DEFAULT_CA
 
 
 def renders(spec, root, manifest, *, episodes: int, workers: int | None = None, progress: bool = True,
-            cameras: Sequence[str] = DEFAULT_CAMERAS, size: int = 64, render: bool = True) -> list:
+            cameras: Sequence[str] = DEFAULT_CAMERAS, size: int = 64, render: bool = True,
+            check: bool = False) -> list:
     """``DatasetSpec.derived``: camera frames of the stored states (cached next to the dataset); for a
     ``-state`` task, its state observations instead.
 
-    ``render=False`` loads states and proprioception only."""
-    if not render:
+    ``render=False`` loads states and proprioception only; ``check=True`` only checks the arguments."""
+    from d5rl.datasets.render_cache import check_render_args, ensure_render_cache
+
+    cameras, size = check_render_args(cameras, size, DEFAULT_CAMERAS)
+    if check or not render:
         return []
-    from d5rl.datasets.render_cache import ensure_render_cache
 
     if spec is not None and spec.observation == "state":
         return [ensure_render_cache(root, manifest, "d5rl.envs.kitchen.data:state_episode", {}, name="state",

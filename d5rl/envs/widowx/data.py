@@ -205,16 +205,18 @@ def state_episode(arrays: dict[str, np.ndarray], meta: dict) -> dict[str, np.nda
 
 
 def renders(spec, root, manifest, *, episodes: int, workers: int | None = None, progress: bool = True,
-            size: int = 128, render: bool = True) -> list:
+            size: int = 128, render: bool = True, check: bool = False) -> list:
     """``DatasetSpec.derived``: the ``observations/pixels/side`` frames, cached next to the dataset; for a
     ``-state`` task, its state observations instead.
 
     ``load_dataset(task, size=64)`` renders another resolution; ``render=False`` loads
-    states and proprioception only.
+    states and proprioception only; ``check=True`` only checks the arguments.
     """
-    if not render:
+    from d5rl.datasets.render_cache import check_render_args, ensure_render_cache
+
+    _, size = check_render_args(None, size)
+    if check or not render:
         return []
-    from d5rl.datasets.render_cache import ensure_render_cache
 
     if spec is not None and spec.observation == "state":
         return [ensure_render_cache(root, manifest, "d5rl.envs.widowx.data:state_episode", {}, name="state",
