@@ -101,6 +101,29 @@ def test_train_arguments(capsys, tmp_path, argv, needle):
     assert not (tmp_path / "run").exists() and not paths.home().exists()
 
 
+@pytest.mark.parametrize("argv, needle", [
+    (["--seeds", "-1"], "--seeds: '-1' is not a seed"),
+    (["--seeds", "3-1"], "'3-1' is not a seed or an ascending range"),
+    (["--seeds", "a"], "'a' is not a seed"),
+    (["--offline-steps", "-1"], "--offline-steps must be a non-negative integer"),
+    (["--offline-steps", "0"], "nothing to train"),
+    (["--workers", "-2"], "--workers must be >= 0"),
+    (["--max-attempts", "0"], "--max-attempts must be >= 1"),
+    (["--cpus-per-cell", "0"], "--cpus-per-cell must be > 0"),
+    (["--nice", "-5"], "--nice must be from 0 to 19"),
+])
+def test_bench_arguments(capsys, tmp_path, argv, needle):
+    one_line_error(capsys, ["bench", "--tasks", "a1-walk-v0", "--algos", "bc", "--out", str(tmp_path / "grid"),
+                            *argv], needle)
+    assert not (tmp_path / "grid").exists() and not paths.home().exists()
+
+
+def test_bench_seeds_lists_and_ranges():
+    from d5rl.runner.cli import _seeds
+
+    assert _seeds(["0-2", "5"]) == [0, 1, 2, 5] and _seeds(["1,2,", "2"]) == [1, 2] and _seeds(["7-7"]) == [7]
+
+
 def test_eval_episodes(capsys, tmp_path):
     one_line_error(capsys, ["eval", str(tmp_path), "--episodes", "0"], "--episodes must be at least 1")
 

@@ -55,21 +55,36 @@ def _check_algos(algos: list[str], job: str) -> list[str]:
 
 
 def _seeds(values: list[str]) -> list[int]:
+    """``0 1 2``, ``0,1,2`` or ``0-2``: non-negative integers, ranges ascending."""
+    from d5rl.runner.grid import GridError
+
     out = []
     for v in values:
-        for part in v.split(","):
-            if "-" in part.strip("-") and not part.startswith("-"):
-                lo, hi = part.split("-")
-                out += list(range(int(lo), int(hi) + 1))
-            elif part.strip():
-                out.append(int(part))
+        for part in (p.strip() for p in v.split(",") if p.strip()):
+            lo, sep, hi = part.partition("-")
+            if not lo.isdigit() or (sep and not hi.isdigit()) or (sep and int(hi) < int(lo)):
+                raise GridError(f"--seeds: {part!r} is not a seed or an ascending range of seeds",
+                                "pass non-negative integers (0 1 2) or a range (0-4)")
+            out += list(range(int(lo), int(hi or lo) + 1))
     return list(dict.fromkeys(out))
+
+
+def _check_resources(args) -> None:
+    from d5rl.runner.grid import GridError
+
+    for name, v, ok, want in (("--workers", args.workers, args.workers is None or args.workers >= 0, ">= 0"),
+                              ("--max-attempts", args.max_attempts, args.max_attempts >= 1, ">= 1"),
+                              ("--cpus-per-cell", args.cpus_per_cell, args.cpus_per_cell > 0, "> 0"),
+                              ("--gpus-per-cell", args.gpus_per_cell, args.gpus_per_cell >= 0, ">= 0"),
+                              ("--nice", args.nice, 0 <= args.nice <= 19, "from 0 to 19")):
+        if not ok:
+            raise GridError(f"{name} must be {want}, got {v}", f"omit {name} for its default")
 
 
 def cmd_bench(args) -> int:
     from d5rl.registry import resolve
     from d5rl.runner.bench import run_bench
-    from d5rl.runner.grid import GridError, expand_grid, parse_assignments
+    from d5rl.runner.grid import DEFAULT_JOB, GridError, expand_grid, parse_assignments
 
     try:  # import the job first: a custom job's module may register its own tasks
         resolve(args.job)
@@ -78,6 +93,12 @@ def cmd_bench(args) -> int:
     tasks = resolve_tasks(args.tasks)
     algos = _check_algos(args.algos, args.job)
     seeds = _seeds(args.seeds)
+    _check_resources(args)
+    if args.job == DEFAULT_JOB:
+        from d5rl.training.config import check_run
+
+        for seed in seeds:
+            check_run(args.offline_steps, args.online_steps, seed)
     protocol = {}
     if args.eval_episodes is not None:
         protocol["eval_episodes"] = args.eval_episodes
