@@ -118,6 +118,13 @@ def test_bench_arguments(capsys, tmp_path, argv, needle):
     assert not (tmp_path / "grid").exists() and not paths.home().exists()
 
 
+@pytest.mark.parametrize("argv, needle", [(["--reps", "0"], "--reps must be an integer >= 1, got 0"),
+                                          (["--seed", "-2"], "--seed must be an integer >= 0, got -2")])
+def test_report_arguments(capsys, tmp_path, argv, needle):
+    one_line_error(capsys, ["report", str(tmp_path), "--out", str(tmp_path / "report"), *argv], needle)
+    assert not (tmp_path / "report").exists()
+
+
 def test_bench_seeds_lists_and_ranges():
     from d5rl.runner.cli import _seeds
 

@@ -447,6 +447,10 @@ def write_report(run_dir: Path | str, out_dir: Path | str | None = None, reps: i
     """Write every report file; returns the path of ``report.md``.  ``videos``: also render one rollout GIF
     per task from the best cell's checkpoint (:mod:`d5rl.runner.videos`)."""
     run_dir = Path(run_dir)
+    for name, v, least, default in (("reps", reps, 1, 2000), ("seed", seed, 0, 0)):
+        if isinstance(v, bool) or not isinstance(v, (int, np.integer)) or v < least:
+            raise ReportError(f"--{name} must be an integer >= {least}, got {v!r}",
+                              f"omit --{name} for its default ({default})")
     if not run_dir.is_dir():
         raise ReportError(f"{run_dir} is not a directory", "pass the --out directory of `d5rl bench`")
     results = collect(run_dir)
