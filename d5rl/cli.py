@@ -123,11 +123,12 @@ def cmd_render(args) -> int:
     from d5rl.progress import progress_bar
 
     from d5rl.registry import get_spec, make_env
-    from d5rl.video import replay_frames, rollout_frames, write_video
+    from d5rl.video import check_video_path, replay_frames, rollout_frames, write_video
 
     spec = get_spec(args.task)
     if args.steps is not None and args.steps < 1:
         raise D5RLError(f"--steps must be at least 1, got {args.steps}", "leave it out to render the whole episode")
+    check_video_path(args.out)
     if args.episode is not None:
         from d5rl.datasets.loading import load_dataset
 

@@ -16,6 +16,28 @@ from typing import Iterable
 import numpy as np
 
 QUALITIES = ("fast", "full")
+VIDEO_SUFFIXES = (".mp4", ".mkv", ".mov", ".avi", ".gif")  # what write_video encodes (.webm silently fails)
+
+
+def check_video_path(path: str | Path) -> Path:
+    """A video's path, checked before anything is rendered: a container :func:`write_video` encodes, in
+    a directory that can be written (created if missing)."""
+    import os
+
+    from d5rl.errors import D5RLError
+
+    path = Path(path).expanduser()
+    if path.suffix.lower() not in VIDEO_SUFFIXES:
+        raise D5RLError(f"cannot write a video to {path}: {path.suffix or 'no suffix'} is not one of "
+                        f"{', '.join(VIDEO_SUFFIXES)}", f"pass e.g. {path.with_suffix('.mp4')}")
+    try:
+        path.parent.mkdir(parents=True, exist_ok=True)
+        if not os.access(path.parent, os.W_OK):
+            raise PermissionError(13, "Permission denied")
+    except OSError as e:
+        raise D5RLError(f"cannot write a video to {path} ({e.strerror or e})",
+                        "pass a path in a writable directory") from None
+    return path
 
 
 class FrameRenderer:

@@ -57,6 +57,20 @@ def test_full_disk_is_named(capsys, monkeypatch):
     one_line_error(capsys, ["generate", spec.id, "--workers", "1"], "is full", "run the same command again")
 
 
+def test_a_missing_directory_on_a_nearly_full_disk_is_not_called_full(tmp_path, monkeypatch):
+    import errno
+    import shutil
+
+    from d5rl.datasets import format as fmt
+
+    real = shutil.disk_usage
+    monkeypatch.setattr(fmt.shutil, "disk_usage", lambda p: real(p)._replace(free=0))  # like /proc
+    gone = FileNotFoundError(errno.ENOENT, "No such file or directory", str(tmp_path / "nope"))
+    assert fmt.disk_full_error(tmp_path / "nope", gone) is None  # the OS said why: not the disk
+    assert "is full" in str(fmt.disk_full_error(tmp_path / "x", OSError(errno.ENOSPC, "No space left")))
+    assert "is full" in str(fmt.disk_full_error(tmp_path / "x", OSError("1 requested and 0 written")))
+
+
 def test_full_disk_for_real_on_a_tiny_tmpfs(capsys, tmp_path, monkeypatch):
     import subprocess
 
@@ -146,6 +160,19 @@ def test_eval_on_a_task_with_other_spaces(capsys, tmp_path):
     one_line_error(capsys, ["eval", str(run), "--task", "toy-reach-pixels-v0"],
                    "trained on toy-reach-v0, whose observation space", "`d5rl info TASK`")
     one_line_error(capsys, ["eval", str(run), "--task", "toy-reach-v1"], "'toy-reach-v1'")
+    one_line_error(capsys, ["eval", str(run), "--seed", "-1"], "seed must be a non-negative integer, got -1")
+    one_line_error(capsys, ["eval", str(run), "--video", str(tmp_path / "v.txt")],
+                   ".txt is not one of .mp4", f"pass e.g. {tmp_path / 'v.mp4'}")
+    (tmp_path / "file").touch()
+    one_line_error(capsys, ["eval", str(run), "--video", str(tmp_path / "file" / "v.mp4")], "cannot write a video to")
+    assert not list(tmp_path.glob("v.*"))
+
+
+def test_render_refuses_a_video_it_cannot_write_before_rendering(capsys, tmp_path):
+    one_line_error(capsys, ["render", "toy-reach-v0", "--steps", "3", "--out", str(tmp_path / "x.webm")],
+                   ".webm is not one of .mp4, .mkv, .mov, .avi, .gif")
+    assert main(["render", "toy-reach-v0", "--steps", "3", "--out", str(tmp_path / "new" / "x.gif")]) == 0
+    assert (tmp_path / "new" / "x.gif").stat().st_size > 0
 
 
 def test_calibrate_episodes(capsys):

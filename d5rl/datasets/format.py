@@ -126,11 +126,14 @@ def _owner_alive(name: str) -> bool:
 def disk_full_error(path: Path, exc: OSError) -> D5RLError | None:
     """A one-line error for a write that failed because the disk is full (numpy's short writes
     carry no errno, so the free space decides); None if the disk is not the cause."""
+    code = getattr(exc, "errno", None)
+    if code not in (None, errno.ENOSPC):
+        return None  # the OS named another cause (no such directory, permission denied, ...)
     try:
         free = shutil.disk_usage(path if path.exists() else path.parent).free
     except OSError:
         free = None
-    if getattr(exc, "errno", None) == errno.ENOSPC or (free is not None and free < 64 << 20):
+    if code == errno.ENOSPC or (free is not None and free < 64 << 20):
         where = f" ({free / 2**20:.0f} MiB free)" if free is not None else ""
         return D5RLError(f"the disk holding {path} is full{where}",
                          "free some space or point D5RL_HOME at a bigger disk, then run the same command again "

@@ -12,6 +12,7 @@ import gymnasium as gym
 import jax
 import numpy as np
 
+from d5rl.errors import D5RLError
 from d5rl.files import write_atomic
 from d5rl.training.envs import env_factory, episode_scorer
 
@@ -50,9 +51,13 @@ def evaluate(
     the same result (see :class:`EvalProgress`).
     """
     if int(num_episodes) < 1:
-        from d5rl.errors import D5RLError
-
         raise D5RLError(f"cannot evaluate on {num_episodes} episodes", "evaluate on at least 1 episode")
+    if isinstance(seed, bool) or not isinstance(seed, (int, np.integer)) or seed < 0:
+        raise D5RLError(f"the evaluation seed must be a non-negative integer, got {seed!r}", "pass e.g. --seed 0")
+    if video_path is not None:
+        from d5rl.video import check_video_path
+
+        video_path = check_video_path(video_path)
     num_envs = max(1, min(int(num_envs), int(num_episodes)))
     render = video_path is not None
     fns = [env_fn or env_factory(task_id, frame_stack, "rgb_array" if (render and i == 0) else None)
@@ -249,5 +254,5 @@ def _write_video(path: Path, frames) -> None:
 
     try:
         write_video(path, frames, fps=20)
-    except Exception:  # noqa: BLE001 - no ffmpeg: fall back to GIF
+    except (ImportError, RuntimeError, ValueError):  # no ffmpeg (the path was checked): fall back to GIF
         write_gif(path.with_suffix(".gif"), frames, fps=20)
