@@ -128,7 +128,7 @@ def cmd_render(args) -> int:
     spec = get_spec(args.task)
     if args.steps is not None and args.steps < 1:
         raise D5RLError(f"--steps must be at least 1, got {args.steps}", "leave it out to render the whole episode")
-    check_video_path(args.out)
+    out = check_video_path(args.out)
     if args.episode is not None:
         from d5rl.datasets.loading import load_dataset
 
@@ -156,10 +156,10 @@ def cmd_render(args) -> int:
         frames = (replay_frames(env, states, args.size, args.quality) if states is not None
                   else rollout_frames(env, total - 1, args.seed, args.size, args.quality))
         bar = progress_bar(frames, total=total, unit="frame", desc=desc)
-        n = write_video(args.out, bar, fps=env.unwrapped.metadata.get("render_fps", 20))
+        n = write_video(out, bar, fps=env.unwrapped.metadata.get("render_fps", 20))
     finally:
         env.close()
-    print(f"wrote {n} frames to {args.out}")
+    print(f"wrote {n} frames to {out}")
     return 0
 
 

@@ -62,7 +62,7 @@ def _seeds(values: list[str]) -> list[int]:
     for v in values:
         for part in (p.strip() for p in v.split(",") if p.strip()):
             lo, sep, hi = part.partition("-")
-            if not lo.isdigit() or (sep and not hi.isdigit()) or (sep and int(hi) < int(lo)):
+            if not lo.isdecimal() or (sep and not hi.isdecimal()) or (sep and int(hi) < int(lo)):
                 raise GridError(f"--seeds: {part!r} is not a seed or an ascending range of seeds",
                                 "pass non-negative integers (0 1 2) or a range (0-4)")
             out += list(range(int(lo), int(hi or lo) + 1))
