@@ -213,7 +213,7 @@ def build_parser() -> argparse.ArgumentParser:
 
     q = sub.add_parser("render", help="write a video of a random rollout or a dataset episode")
     q.add_argument("task")
-    q.add_argument("--out", default="video.mp4")
+    q.add_argument("--out", default="video.mp4", help="the video: .mp4, .mkv, .mov, .avi or .gif (default video.mp4)")
     q.add_argument("--steps", type=int, help="render at most this many steps (default: the whole episode)")
     q.add_argument("--seed", type=int, default=0, help="seed of the random rollout")
     q.add_argument("--episode", type=int, help="replay this dataset episode from its stored states")

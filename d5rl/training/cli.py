@@ -58,7 +58,8 @@ def add_eval_parser(subparsers) -> argparse.ArgumentParser:
     p.add_argument("--envs", type=int, default=5, help="environments stepped in lockstep")
     p.add_argument("--processes", action="store_true", help="one process per environment")
     p.add_argument("--seed", type=int, default=12345, help="episode i resets with seed + i")
-    p.add_argument("--video", default=None, metavar="PATH", help="record the first episode (mp4)")
+    p.add_argument("--video", default=None, metavar="PATH",
+                   help="record the first episode (.mp4, .mkv, .mov, .avi or .gif)")
     p.add_argument("--task", default=None, help="evaluate on another task id (same spaces)")
     p.add_argument("--json", action="store_true", help="print the result as JSON")
     p.set_defaults(func=cmd_eval)
