@@ -167,9 +167,14 @@ def serve(host: str, port: int, run_dirs: list[Path]) -> None:
     for r in run_dirs:
         if not Path(r).is_dir():
             raise D5RLError(f"run directory {r} does not exist", "pass the --out directory of `d5rl bench`")
+    if isinstance(port, bool) or not isinstance(port, int) or not 1 <= port <= 65535:
+        raise D5RLError(f"--port must be from 1 to 65535, got {port!r}", "omit --port for 8765")
     with socket.socket(socket.AF_INET6 if ":" in host else socket.AF_INET) as s:
         try:
             s.bind((host, port))
+        except socket.gaierror as e:  # not an address or a name of this machine
+            raise D5RLError(f"cannot listen on {host}: {e.strerror}",
+                            "pass an address of this machine with --host (omit it for 127.0.0.1)") from None
         except OSError as e:
             raise D5RLError(f"cannot listen on {host}:{port}: {e.strerror}", "pick another port with --port") from None
     app = create_app(run_dirs)

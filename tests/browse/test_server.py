@@ -221,3 +221,16 @@ def test_safe_paths_resolve_before_checking(tmp_path):
     os.symlink(tmp_path / "out.mp4", root / "a" / "l.mp4")
     with pytest.raises(NotAllowed):
         file_under(root, "a/l.mp4", (".mp4",))
+
+
+@pytest.mark.parametrize("host, port, needle", [
+    ("127.0.0.1", 70000, "--port must be from 1 to 65535, got 70000"),
+    ("127.0.0.1", 0, "--port must be from 1 to 65535, got 0"),
+    ("256.1.1.1", 8765, "pass an address of this machine with --host"),
+])
+def test_serve_refuses_a_bad_port_or_host_in_one_line(host, port, needle):
+    from d5rl.browse.server import serve
+    from d5rl.errors import D5RLError
+
+    with pytest.raises(D5RLError, match=needle.replace("-", r"\-")):
+        serve(host, port, [])
