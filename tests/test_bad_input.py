@@ -95,6 +95,7 @@ def test_full_disk_for_real_on_a_tiny_tmpfs(capsys, tmp_path, monkeypatch):
     ("batch_size=0", "batch_size=0 is invalid"),
     ("actor_lr=-1e-4", "actor_lr=-0.0001 is invalid"),
     ("discount=1.5", "discount=1.5 is invalid"),
+    ("offline_ratio=2", "it must be a number >= 0 and <= 1 or none"),
     ("hidden_dims=0,3", "hidden_dims=(0, 3) is invalid"),
 ])
 def test_train_settings(capsys, tmp_path, setting, needle):

@@ -167,10 +167,9 @@ class Bound:
     each: bool = False  # a tuple of such values (e.g. hidden layer widths), at least one
 
     def describe(self) -> str:
-        parts = [("an integer" if self.kind is int else "a number")]
-        parts += [f"{op} {v:g}" for op, v in ((">=", self.ge), (">", self.gt), ("<=", self.le), ("<", self.lt))
-                  if v is not None]
-        text = " ".join(parts)
+        bounds = " and ".join(f"{op} {v:g}" for op, v in ((">=", self.ge), (">", self.gt), ("<=", self.le),
+                                                          ("<", self.lt)) if v is not None)
+        text = ("an integer" if self.kind is int else "a number") + (f" {bounds}" if bounds else "")
         text = f"a list of {text.replace('an integer', 'integers').replace('a number', 'numbers')}" if self.each else text
         return text + (" or none" if self.optional else "")
 
