@@ -111,10 +111,6 @@ def load_dataset(
     raise AssertionError("unreachable")
 
 
-_LOAD_KEYWORDS = ("seed", "episodes", "generate", "in_memory", "memory_limit_bytes", "obs_keys", "workers",
-                  "progress")
-
-
 def _check_derived_kwargs(spec: TaskSpec, dspec, kwargs: dict) -> None:
     """Refuse keyword arguments that the dataset's derived-cache builder does not take, or values it
     cannot use, before any generation (else a typo would surface only after generating the dataset)."""
@@ -123,17 +119,18 @@ def _check_derived_kwargs(spec: TaskSpec, dspec, kwargs: dict) -> None:
 
     if not kwargs:
         return
+    own = [name for name, p in inspect.signature(load_dataset).parameters.items() if p.kind is p.KEYWORD_ONLY]
     builder = None if dspec.derived is None else resolve(dspec.derived)
     params = {} if builder is None else inspect.signature(builder).parameters
     takes = [name for name, p in params.items()
              if p.kind is p.KEYWORD_ONLY and name not in ("episodes", "workers", "progress", "check")]
     unknown = sorted(set(kwargs) - set(takes))
     if unknown:
-        near = [m for u in unknown for m in difflib.get_close_matches(u, takes + list(_LOAD_KEYWORDS), n=1)]
+        near = [m for u in unknown for m in difflib.get_close_matches(u, takes + own, n=1)]
         raise DatasetArgumentError(
             f"{spec.id}'s dataset takes no argument {', '.join(map(repr, unknown))}",
             (f"did you mean {', '.join(map(repr, near))}? " if near else "")
-            + f"it takes {', '.join(_LOAD_KEYWORDS + tuple(takes))}")
+            + f"it takes {', '.join(own + takes)}")
     if "check" in params:  # a builder that can check its values without work (d5rl's own do)
         builder(spec, None, None, episodes=0, check=True, **kwargs)
 
