@@ -21,6 +21,7 @@ import numpy as np
 
 from d5rl.datasets.episode import Episode
 from d5rl.envs.kitchen.subtasks import PARTIAL, SUBTASK_NAMES
+from d5rl.envs.kitchen.task import CAMERAS
 
 COMBINATIONS: tuple[tuple[str, str, str, str], ...] = (
     ("microwave", "kettle", "light switch", "slide cabinet"),
@@ -48,7 +49,6 @@ COMBINATIONS: tuple[tuple[str, str, str, str], ...] = (
 )
 assert all(set(c) != set(PARTIAL) for c in COMBINATIONS)
 MAX_STEPS = 280
-DEFAULT_CAMERAS = ("overview", "wrist")
 
 
 class KitchenStandardGenerator:
@@ -146,7 +146,7 @@ def _render_env(size: int):
     return _RENDER_ENV[size]
 
 
-def render_states(env, states: np.ndarray, cameras: Sequence[str] = DEFAULT_CAMERAS, size: int = 64):
+def render_states(env, states: np.ndarray, cameras: Sequence[str] = CAMERAS, size: int = 64):
     """``{camera: uint8 (N, size, size, 3)}`` for stored simulator states (one row per state)."""
     states = np.asarray(states, dtype=np.float64)
     out = {c: np.empty((len(states), size, size, 3), np.uint8) for c in cameras}
@@ -166,14 +166,14 @@ def state_episode(arrays: dict, meta: dict) -> dict:
     return {"observations": state_observations(qpos_of_states(arrays["states"], JOINTS))}
 
 
-def render_episode(arrays: dict, meta: dict, cameras: Sequence[str] = DEFAULT_CAMERAS, size: int = 64) -> dict:
+def render_episode(arrays: dict, meta: dict, cameras: Sequence[str] = CAMERAS, size: int = 64) -> dict:
     """Derived arrays of one stored episode: ``observations/pixels/<camera>``."""
     frames = render_states(_render_env(int(size)), arrays["states"], cameras, int(size))
     return {f"observations/pixels/{c}": v for c, v in frames.items()}
 
 
 def renders(spec, root, manifest, *, episodes: int, workers: int | None = None, progress: bool = True,
-            cameras: Sequence[str] = DEFAULT_CAMERAS, size: int = 64, render: bool = True,
+            cameras: Sequence[str] = CAMERAS, size: int = 64, render: bool = True,
             check: bool = False) -> list:
     """``DatasetSpec.derived``: camera frames of the stored states (cached next to the dataset); for a
     ``-state`` task, its state observations instead.
@@ -181,7 +181,7 @@ def renders(spec, root, manifest, *, episodes: int, workers: int | None = None, 
     ``render=False`` loads states and proprioception only; ``check=True`` only checks the arguments."""
     from d5rl.datasets.render_cache import check_render_args, ensure_render_cache
 
-    cameras, size = check_render_args(cameras, size, DEFAULT_CAMERAS)
+    cameras, size = check_render_args(cameras, size, CAMERAS)
     if check or not render:
         return []
 

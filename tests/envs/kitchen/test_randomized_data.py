@@ -26,7 +26,7 @@ def test_episode_deterministic_and_rerender_matches_env(gen):
     env = RandomizedKitchenEnv(image_size=64, domain=Domain.from_json(a.meta["domain"]))
     env.reset(seed=0)
     env.set_state(a.arrays["states"][250])
-    for c in rd.DEFAULT_CAMERAS:
+    for c in rd.CAMERAS:
         assert np.array_equal(frames[f"observations/pixels/{c}"][1], env.render_camera_image(c, 64, 64))
     ds = Dataset.from_episodes([a])
     assert ds.num_transitions == 500 and ds.episode_meta[0]["domain"] == a.meta["domain"]

@@ -25,10 +25,10 @@ import numpy as np
 
 from d5rl.datasets.episode import Episode
 from d5rl.envs.kitchen.data import record_episode
+from d5rl.envs.kitchen.randomized.task import CAMERAS
 from d5rl.envs.kitchen.subtasks import MIXED, PARTIAL, SUBTASK_NAMES
 
 MAX_STEPS = 500
-DEFAULT_CAMERAS = ("left", "right", "wrist")
 
 
 @dataclasses.dataclass(frozen=True)
@@ -132,7 +132,7 @@ class RandomizedKitchenGenerator:
 _RENDER_ENV = {}
 
 
-def render_episode(arrays: dict, meta: dict, cameras: Sequence[str] = DEFAULT_CAMERAS, size: int = 128) -> dict:
+def render_episode(arrays: dict, meta: dict, cameras: Sequence[str] = CAMERAS, size: int = 128) -> dict:
     """``observations/pixels/<camera>`` of a stored episode, in its stored domain."""
     from d5rl.envs.kitchen.randomized.domain import Domain
     from d5rl.envs.kitchen.randomized.task import RandomizedKitchenEnv
@@ -152,13 +152,13 @@ def render_episode(arrays: dict, meta: dict, cameras: Sequence[str] = DEFAULT_CA
 
 
 def renders(spec, root, manifest, *, episodes: int, workers: int | None = None, progress: bool = True,
-            cameras: Sequence[str] = DEFAULT_CAMERAS, size: int = 128, render: bool = True,
+            cameras: Sequence[str] = CAMERAS, size: int = 128, render: bool = True,
             check: bool = False) -> list:
     """``DatasetSpec.derived``: camera frames of the stored states in their domains (cached); for a
     ``-state`` task, its state observations instead.  ``check=True`` only checks the arguments."""
     from d5rl.datasets.render_cache import check_render_args, ensure_render_cache
 
-    cameras, size = check_render_args(cameras, size, DEFAULT_CAMERAS)
+    cameras, size = check_render_args(cameras, size, CAMERAS)
     if check or not render:
         return []
 
