@@ -53,3 +53,13 @@ class RenderBackendError(D5RLError, RuntimeError):
 
 class MissingDependencyError(D5RLError, ImportError):
     """An optional dependency (an extra) is not installed."""
+
+
+def is_int(value, lo: int | None = None, hi: int | None = None) -> bool:
+    """Whether ``value`` is an integer (Python's or NumPy's; a bool is not) in ``[lo, hi]``: the one check behind
+    every count, seed, size and port that d5rl validates before work starts."""
+    import numbers
+
+    if isinstance(value, bool) or not isinstance(value, numbers.Integral):
+        return False
+    return bool((lo is None or value >= lo) and (hi is None or value <= hi))

@@ -37,7 +37,7 @@ from dataclasses import dataclass
 from pathlib import Path
 from typing import Any, Callable, Sequence
 
-from d5rl.errors import D5RLError, MissingDependencyError
+from d5rl.errors import D5RLError, MissingDependencyError, is_int
 from d5rl.xla_flags import SINGLE_THREAD, add_xla_flags
 
 
@@ -56,7 +56,7 @@ def check_workers(workers: Workers) -> None:
     """One-line error for a worker count that is not a positive integer (None = all cores)."""
     if workers is None or isinstance(workers, Ray):
         return
-    if isinstance(workers, bool) or not isinstance(workers, int) or workers < 1:
+    if not is_int(workers, lo=1):
         raise D5RLError(f"workers must be a positive number of processes, got {workers!r}",
                         "omit --workers to use every core, or pass --workers 1 to run in this process")
 

@@ -5,10 +5,11 @@ import importlib
 import inspect
 import pkgutil
 
+import numpy as np
 import pytest
 
 import d5rl
-from d5rl.errors import D5RLError
+from d5rl.errors import D5RLError, is_int
 
 
 def all_error_classes():
@@ -42,3 +43,13 @@ def test_one_line(cls):
     if takes_hint:  # no quotes (KeyError), no errno (OSError), the hint after the message
         assert str(e) == "the dataset is stale (hint: run `d5rl generate`)"
         assert str(cls("no hint here")) == "no hint here"
+
+
+@pytest.mark.parametrize("value, lo, hi, ok", [
+    (0, 0, None, True), (3, 1, 3, True), (np.int64(5), 1, None, True), (np.uint8(7), 0, 255, True),
+    (-1, 0, None, False), (4, 1, 3, False), (0, 1, None, False),
+    (True, 0, None, False), (np.bool_(True), 0, None, False), (2.0, 0, None, False), ("2", 0, None, False),
+    (None, 0, None, False), (float("nan"), 0, None, False),
+])
+def test_is_int(value, lo, hi, ok):
+    assert is_int(value, lo=lo, hi=hi) is ok

@@ -20,7 +20,7 @@ import socket
 import sys
 from pathlib import Path
 
-from d5rl.errors import D5RLError
+from d5rl.errors import D5RLError, is_int
 
 STATIC = Path(__file__).resolve().parent / "static"
 VIDEO_TYPES = {".mp4": "video/mp4", ".webm": "video/webm", ".gif": "image/gif"}
@@ -167,7 +167,7 @@ def serve(host: str, port: int, run_dirs: list[Path]) -> None:
     for r in run_dirs:
         if not Path(r).is_dir():
             raise D5RLError(f"run directory {r} does not exist", "pass the --out directory of `d5rl bench`")
-    if isinstance(port, bool) or not isinstance(port, int) or not 1 <= port <= 65535:
+    if not is_int(port, lo=1, hi=65535):
         raise D5RLError(f"--port must be from 1 to 65535, got {port!r}", "omit --port for 8765")
     with socket.socket(socket.AF_INET6 if ":" in host else socket.AF_INET) as s:
         try:

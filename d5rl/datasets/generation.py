@@ -24,7 +24,7 @@ from d5rl import parallel, paths
 from d5rl.datasets import format as fmt
 from d5rl.datasets import lock
 from d5rl.datasets.episode import Episode
-from d5rl.errors import D5RLError, DatasetVersionError
+from d5rl.errors import D5RLError, DatasetVersionError, is_int
 from d5rl.files import dump_json, json_default
 from d5rl.registry import DatasetSpec, TaskSpec, get_spec, resolve
 
@@ -45,7 +45,7 @@ def dataset_spec(task: str | TaskSpec) -> DatasetSpec:
 
 def check_seed(seed) -> int:
     """A dataset seed, checked before any work: an integer in [0, 2**63)."""
-    if isinstance(seed, bool) or not isinstance(seed, (int, np.integer)) or not 0 <= int(seed) <= MAX_SEED:
+    if not is_int(seed, lo=0, hi=MAX_SEED):
         raise D5RLError(f"dataset seed must be an integer in [0, 2**63), got {seed!r}",
                         "omit --seed (seed= in Python) to use the task's default seed (0)")
     return int(seed)
@@ -55,8 +55,7 @@ def check_episodes(episodes, dspec: DatasetSpec) -> int:
     """A number of episodes, checked before any work: 1 ..= the dataset's full size."""
     if episodes is None:
         return dspec.num_episodes
-    if isinstance(episodes, bool) or not isinstance(episodes, (int, np.integer)) \
-            or not 1 <= int(episodes) <= dspec.num_episodes:
+    if not is_int(episodes, lo=1, hi=dspec.num_episodes):
         raise D5RLError(f"{dspec.name} has {dspec.num_episodes} episodes; {episodes!r} were asked for",
                         f"ask for 1 to {dspec.num_episodes} episodes "
                         "(omit --episodes, or episodes= in Python, for all of them)")

@@ -45,14 +45,14 @@ FRAME_SIZES = (8, 1024)  # the smallest and largest square frame a cache renders
 def check_render_args(cameras, size: int, available: tuple[str, ...] | None = None) -> tuple[tuple[str, ...], int]:
     """A cache's camera names and frame size, checked before any work (a family's ``derived`` builder
     calls this first): ``cameras`` a non-empty list of distinct names from ``available``."""
-    from d5rl.errors import DatasetArgumentError
+    from d5rl.errors import DatasetArgumentError, is_int
 
     if available is not None and (isinstance(cameras, str) or not isinstance(cameras, (list, tuple)) or not cameras
                                   or len(set(cameras)) != len(cameras) or not set(cameras) <= set(available)):
         raise DatasetArgumentError(f"cameras must be a list of distinct names from {list(available)}, got {cameras!r}",
                                    f"pass e.g. cameras={list(available)}")
     lo, hi = FRAME_SIZES
-    if isinstance(size, bool) or not isinstance(size, (int, np.integer)) or not lo <= size <= hi:
+    if not is_int(size, lo=lo, hi=hi):
         raise DatasetArgumentError(f"size must be an integer number of pixels from {lo} to {hi}, got {size!r}",
                                    "pass e.g. size=64 (frames are size x size)")
     return (None if available is None else tuple(cameras)), int(size)

@@ -34,7 +34,7 @@ from pathlib import Path
 
 import numpy as np
 
-from d5rl.errors import D5RLError
+from d5rl.errors import D5RLError, is_int
 from d5rl.runner import stats
 from d5rl.runner.execute import attempt_header, is_done, read_failures
 from d5rl.runner.grid import DONE_FILE, LOG_FILE, find_cells, stale_reason, trained_on
@@ -448,7 +448,7 @@ def write_report(run_dir: Path | str, out_dir: Path | str | None = None, reps: i
     per task from the best cell's checkpoint (:mod:`d5rl.runner.videos`)."""
     run_dir = Path(run_dir)
     for name, v, least, default in (("reps", reps, 1, 2000), ("seed", seed, 0, 0)):
-        if isinstance(v, bool) or not isinstance(v, (int, np.integer)) or v < least:
+        if not is_int(v, lo=least):
             raise ReportError(f"--{name} must be an integer >= {least}, got {v!r}",
                               f"omit --{name} for its default ({default})")
     if not run_dir.is_dir():

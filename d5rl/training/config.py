@@ -5,9 +5,8 @@ from __future__ import annotations
 
 from typing import Mapping
 
-import numpy as np
-
 from d5rl.agents.config import Bound, Config, ConfigError
+from d5rl.errors import is_int
 
 
 def get_train_config() -> Config:
@@ -53,7 +52,7 @@ TRAIN_BOUNDS = {
 def check_run(offline_steps, online_steps, seed) -> None:
     """One-line errors for step counts and seeds that cannot make a run."""
     for name, v in (("--offline-steps", offline_steps), ("--online-steps", online_steps), ("--seed", seed)):
-        if isinstance(v, bool) or not isinstance(v, (int, np.integer)) or v < 0:
+        if not is_int(v, lo=0):
             raise ConfigError(f"{name} must be a non-negative integer, got {v!r}", f"pass e.g. {name} 0")
     if offline_steps == 0 and online_steps == 0:
         raise ConfigError("nothing to train: --offline-steps and --online-steps are both 0",

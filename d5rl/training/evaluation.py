@@ -12,7 +12,7 @@ import gymnasium as gym
 import jax
 import numpy as np
 
-from d5rl.errors import D5RLError
+from d5rl.errors import D5RLError, is_int
 from d5rl.files import write_atomic
 from d5rl.training.envs import env_factory, episode_scorer
 
@@ -52,7 +52,7 @@ def evaluate(
     """
     if int(num_episodes) < 1:
         raise D5RLError(f"cannot evaluate on {num_episodes} episodes", "evaluate on at least 1 episode")
-    if isinstance(seed, bool) or not isinstance(seed, (int, np.integer)) or seed < 0:
+    if not is_int(seed, lo=0):
         raise D5RLError(f"the evaluation seed must be a non-negative integer, got {seed!r}", "pass e.g. --seed 0")
     if video_path is not None:
         from d5rl.video import check_video_path
