@@ -6,6 +6,8 @@ line, without a traceback; library users can catch :class:`D5RLError`.
 
 from __future__ import annotations
 
+import numbers
+
 
 class D5RLError(Exception):
     """Base class: a problem the user can fix.  ``hint`` says how."""
@@ -56,10 +58,9 @@ class MissingDependencyError(D5RLError, ImportError):
 
 
 def is_int(value, lo: int | None = None, hi: int | None = None) -> bool:
-    """Whether ``value`` is an integer (Python's or NumPy's; a bool is not) in ``[lo, hi]``: the one check behind
-    every count, seed, size and port that d5rl validates before work starts."""
-    import numbers
-
+    """Whether ``value`` is an integer (Python's or NumPy's; a bool is not) in ``[lo, hi]``: the check behind the
+    seeds, counts, frame sizes, ports and worker numbers that d5rl validates before work starts (config values
+    have :class:`d5rl.agents.config.Bound`)."""
     if isinstance(value, bool) or not isinstance(value, numbers.Integral):
         return False
     return bool((lo is None or value >= lo) and (hi is None or value <= hi))
