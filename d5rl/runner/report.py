@@ -223,15 +223,16 @@ def comparison_markdown(table: dict, phase: str, title: str) -> str | None:
     """Our table next to the paper's: each entry "ours / paper" (mean ± std), None if the paper has no row.
 
     Its columns are the methods run here and every method the paper reports for these rows, so a method
-    not run yet shows as "- / the paper's number" rather than vanishing from the table."""
+    not run yet shows as "- / the paper's number" rather than vanishing from the table.  A task the paper
+    did not benchmark keeps its row, labelled so, its entries "ours / -": the table has every task of
+    the grid, as the one without the paper's does."""
     from d5rl.runner.paper import paper_methods, paper_result, paper_task
 
     algos = _method_order({a for _, a in table}.union(*(paper_methods(t, phase) for t, _ in table)))
-    every_row = _table_rows(table, algos)
-    rows = [r for r in every_row if paper_methods(r[1], phase)]
-    if not rows:
+    rows = _table_rows(table, algos)
+    if not any(paper_methods(task, phase) for _, task, _ in rows):
         return None
-    seeds = _most_seeds(every_row)  # over every row, as in the table without the paper's
+    seeds = _most_seeds(rows)
 
     def cell(task, a, e):
         p = paper_result(task, a, phase)
@@ -239,6 +240,8 @@ def comparison_markdown(table: dict, phase: str, title: str) -> str | None:
         return f"{_entry(e, seeds)} / {paper}"
 
     def label(task):
+        if not paper_methods(task, phase):
+            return f"{task} (not in the paper)"
         return task if paper_task(task) == task else f"{task} (paper: {paper_task(task)})"
 
     intro = [f"### {title} (ours / paper)", "",

@@ -76,6 +76,27 @@ def test_tables_next_to_the_papers(tmp_path):
     assert "0.935 ± 0.017" in online  # a1-walk IQL after fine-tuning
 
 
+def test_a_task_the_paper_did_not_benchmark_keeps_its_row_next_to_the_papers(tmp_path):
+    """The comparison has every task of the grid: one the paper has no row for is labelled so, "ours / -"."""
+    for task, score in (("a1-walk-v0", 0.25), ("kitchen-randomized-suboptimal-state-v0", 0.5)):
+        cell = Cell(task, "bc", 0, 100, 0)
+        cdir = cell.directory(tmp_path)
+        write_cell_file(cell, cdir)
+        (cdir / "metrics.jsonl").write_text(json.dumps({"step": 100, f"eval/{task}/score": score}) + "\n")
+        (cdir / "done").write_text("{}")
+    write_report(tmp_path, reps=50, plots=False)
+    md = (tmp_path / "report" / "table1_offline_vs_paper.md").read_text()
+    assert "| Randomized Kitchen | kitchen-randomized-suboptimal-state-v0 (not in the paper) | 0.500 ± 0.000 / - |" in md
+    assert "| a1-walk-v0 | 0.250 ± 0.000 / 1.006 ± 0.015 |" in md
+    only_toy = tmp_path / "toy"
+    cell = Cell("toy-reach-v0", "bc", 0, 100, 0)
+    write_cell_file(cell, cell.directory(only_toy))
+    (cell.directory(only_toy) / "metrics.jsonl").write_text(json.dumps({"step": 100, "eval/toy-reach-v0/score": 1.0}) + "\n")
+    (cell.directory(only_toy) / "done").write_text("{}")
+    write_report(only_toy, reps=50, plots=False)
+    assert not (only_toy / "report" / "table1_offline_vs_paper.md").exists()  # no row of the paper's at all
+
+
 def test_a_state_twin_is_compared_with_its_camera_task():
     from d5rl.runner.paper import paper_result
 
