@@ -137,7 +137,7 @@ def train(
     try:
         agent = offline_phase(run, agent, state)
         agent = online_phase(run, agent, state)
-        final = run.evaluate(agent, state.step, cfg.final_eval_episodes or cfg.eval_episodes)
+        final = run.evaluate(agent, state, cfg.final_eval_episodes or cfg.eval_episodes)
         summary = {"step": state.step, "run_dir": str(run_dir), **{k: v for k, v in final.items() if k != "returns"},
                    "run_wall_s": round(state.elapsed(), 1), "resumed": resume is not None}
         (run_dir / "summary.json").write_text(json.dumps(summary, indent=2) + "\n")
@@ -224,7 +224,7 @@ def _offline_updates(run: Run, agent, state: RunState, n_batch: int, k: int, nex
         run.bar.update(n)
         metrics.maybe_log(prev)
         if crossed(prev, state.step, cfg.eval_interval) and state.step < total:
-            run.evaluate(agent, state.step, cfg.eval_episodes)
+            run.evaluate(agent, state, cfg.eval_episodes)
         if crossed(prev, state.step, cfg.checkpoint_interval) or state.step == run.offline_steps:
             run.checkpoint(agent, state)
     return agent
@@ -270,7 +270,7 @@ def online_phase(run: Run, agent, state: RunState):
         metrics.maybe_log(prev)
         ckpt_due |= crossed(prev, state.step, cfg.checkpoint_interval)
         if crossed(prev, state.step, cfg.eval_interval) and state.step < total:
-            run.evaluate(agent, state.step, cfg.eval_episodes)
+            run.evaluate(agent, state, cfg.eval_episodes)
         if term or trunc:
             state.buffer.end_episode()
             if needs_mc:

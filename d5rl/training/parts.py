@@ -47,7 +47,7 @@ class RunState:
 
     def elapsed(self) -> float:
         """Wall seconds of the run over all its sittings (work after a sitting's last checkpoint is lost and
-        not counted)."""
+        not counted, but for an evaluation's finished episodes, which a resumed evaluation keeps)."""
         return self.elapsed_before + time.monotonic() - self.started
 
     def to_json(self) -> dict:
@@ -180,7 +180,10 @@ class Evaluator:
         self.task_id, self.seed, self.frame_stack, self.cfg = task_id, seed, frame_stack, cfg
         self.logger, self.run_dir = logger, run_dir
 
-    def __call__(self, agent, step: int, episodes: int) -> dict[str, Any]:
+    def __call__(self, agent, state: RunState, episodes: int) -> dict[str, Any]:
+        """Evaluate ``agent`` at ``state.step``; an evaluation resumed from an earlier sitting adds that sitting's
+        time on it to the run's wall time (``state.elapsed_before``)."""
+        step = state.step
         video = self.run_dir / "videos" / f"step{step:09d}.mp4" if self.cfg.save_video else None
         # a kill mid-evaluation loses at most one batch of episodes: the rerun of this step's evaluation, on the
         # same agent, resumes from the file (a 100-episode IDQL evaluation is an hour of CPU)
@@ -189,6 +192,7 @@ class Evaluator:
         res = evaluate(agent, self.task_id, episodes, seed=10_000 * (self.seed + 1), num_envs=self.cfg.eval_envs,
                        frame_stack=self.frame_stack, processes=self.cfg.eval_processes, video_path=video,
                        progress=progress)
+        state.elapsed_before += progress.earlier_s
         row = {k: res[k] for k in ("return", "return_std", "length", "success", "score") if k in res}
         self.logger.log(step, {f"eval/{self.task_id}/{k}": v for k, v in {**row, **res.get("stats", {})}.items()})
         return res

@@ -94,6 +94,27 @@ def test_a_killed_evaluation_resumes_at_its_first_unfinished_episode(tmp_path):
     assert resumed == unbroken and not path.exists()
 
 
+def test_an_evaluation_keeps_the_time_its_finished_episodes_took_over_sittings(tmp_path, monkeypatch):
+    from d5rl.training import evaluation
+
+    clock = [1000.0]
+    monkeypatch.setattr(evaluation.time, "monotonic", lambda: clock[0])
+    ev, ep = {"task_id": "toy-reach-v0", "seed": 3, "num_episodes": 6, "frame_stack": 1}, \
+        {"return": 1.0, "length": 25, "success": False, "info": {}}
+    first = evaluation.EvalProgress(tmp_path / "p.json", {"step": 7})
+    assert first.load(ev) == [] and first.earlier_s == 0.0
+    clock[0] += 30.0
+    first.save(ev, [ep, ep])
+    clock[0] += 3600.0  # the machine was off: not the evaluation's time
+    second = evaluation.EvalProgress(tmp_path / "p.json", {"step": 7})
+    assert len(second.load(ev)) == 2 and second.earlier_s == 30.0
+    clock[0] += 5.0
+    second.save(ev, [ep] * 4)
+    assert json.loads((tmp_path / "p.json").read_text())["wall_s"] == 35.0
+    other = evaluation.EvalProgress(tmp_path / "p.json", {"step": 8})  # another evaluation: none of its time
+    assert other.load(ev) == [] and other.earlier_s == 0.0
+
+
 @pytest.mark.parametrize("case", ["other identity", "damaged"])
 def test_an_evaluation_does_not_resume_from_another_or_a_damaged_one(tmp_path, case, capsys):
     from d5rl.training.evaluation import EvalProgress, evaluate
@@ -131,9 +152,14 @@ def test_a_run_killed_in_its_final_evaluation_resumes_it(tmp_path, monkeypatch, 
         train("bc", "toy-reach-v0", 32, 0, 1, kw, tmp_path / "b", dataset=ds)
     assert len(json.loads((tmp_path / "b" / "eval_progress.json").read_text())["episodes"]) == 2
     monkeypatch.setattr(EvalProgress, "save", real_save)
+    progress = json.loads((tmp_path / "b" / "eval_progress.json").read_text())
+    assert progress["wall_s"] > 0  # the first sitting's time on the two finished episodes
+    progress["wall_s"] = 5000.0  # as if they had taken 5,000 s: the resumed run must count them
+    (tmp_path / "b" / "eval_progress.json").write_text(json.dumps(progress))
     capsys.readouterr()
     resumed = train("bc", "toy-reach-v0", 32, 0, 1, kw, tmp_path / "b", dataset=ds)
     assert "evaluation resumes at episode 3 of 6" in capsys.readouterr().out
+    assert 5000.0 < resumed["run_wall_s"] < 5000.0 + full["run_wall_s"] + 600
     drop = ("run_dir", "run_wall_s", "resumed", "agent")
     assert {k: v for k, v in resumed.items() if k not in drop} == {k: v for k, v in full.items() if k not in drop}
     assert rows(tmp_path / "a") == rows(tmp_path / "b") and not (tmp_path / "b" / "eval_progress.json").exists()
