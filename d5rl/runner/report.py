@@ -54,6 +54,7 @@ ENVIRONMENTS = [
 ]
 VIDEO_EXTS = (".mp4", ".gif", ".webm")
 VIDEOS_PER_CELL = 3
+GRID_FOLDER = "cells"  # a published grid's cells live in docs/results/NAME/cells: the grid's name is NAME
 
 
 class ReportError(D5RLError):
@@ -76,11 +77,17 @@ def _env_order(label: str) -> int:
     return labels.index(label) if label in labels else len(labels)
 
 
+def task_order(task: str) -> tuple:
+    """Sort key of a task in the tables: the paper's environment order, then the task id."""
+    env = environment(task)
+    return _env_order(env), env, task
+
+
 def method_name(algo: str) -> str:
     return METHODS.get(algo, algo)
 
 
-def _method_order(algos) -> list[str]:
+def method_order(algos) -> list[str]:
     known = [a for a in METHODS if a in algos]
     return known + sorted(a for a in algos if a not in METHODS)
 
@@ -100,8 +107,8 @@ class CellResult:
     videos: list[Path]
     stale: str | None = None  # why the result describes data the task no longer has (None: current)
     data: dict | None = None  # the dataset the job recorded (name, versions, seed, episodes)
-    wall_s: float | None = None  # the run's wall time over all its sittings (see wall_is_last_sitting)
-    wall_is_last_sitting: bool = False  # resumed by code that did not yet count earlier sittings: a lower bound
+    wall_s: float | None = None  # the run's wall time summed over the processes that ran it (a resumed run has several)
+    wall_is_last_process: bool = False  # resumed by code that did not yet add up earlier processes: a lower bound
     eval_episodes: int | None = None  # episodes of the final evaluation
     stats: dict[str, float] | None = None  # the final evaluation's episode statistics (what the agent did)
 
@@ -132,17 +139,17 @@ def collect(run_dir: Path | str) -> list[CellResult]:
         marker = _read_json(cdir / DONE_FILE) if done else {}
         summary = marker.get("summary") or {}
         wall, partial = summary.get("run_wall_s"), False
-        if wall is None and marker.get("wall_s") is not None:  # older runs: the last sitting's time only
-            wall, partial = marker["wall_s"], _sittings(cdir / LOG_FILE, cell.key) > 1
+        if wall is None and marker.get("wall_s") is not None:  # older runs: the last process's time only
+            wall, partial = marker["wall_s"], _processes(cdir / LOG_FILE, cell.key) > 1
         out.append(CellResult(cell.task, cell.algo, cell.seed, cell.offline_steps, cell.online_steps, cdir,
                               done, rows, final, len(read_failures(cdir)), videos,
                               stale=stale_reason(cell, cdir) if done else None, data=trained_on(cdir),
-                              wall_s=wall, wall_is_last_sitting=partial, eval_episodes=summary.get("episodes"),
+                              wall_s=wall, wall_is_last_process=partial, eval_episodes=summary.get("episodes"),
                               stats=_read_json(cdir / "summary.json").get("stats") if done else None))
     return out
 
 
-def _sittings(log: Path, key: str) -> int:
+def _processes(log: Path, key: str) -> int:
     """How many processes worked on a cell: the attempt headers in its log."""
     try:
         return sum(line.startswith(attempt_header(key)) for line in log.read_text(errors="replace").splitlines())
@@ -160,13 +167,28 @@ def _read_json(path: Path) -> dict:
     return out if isinstance(out, dict) else {}
 
 
-def score_table(results: list[CellResult], phase: str) -> dict[tuple[str, str], np.ndarray]:
-    """``{(task, algo): final scores over seeds}`` of finished cells for one phase."""
-    table: dict[tuple[str, str], list[float]] = {}
+def table_cells(results: list[CellResult], phase: str) -> dict[tuple[str, str], list[CellResult]]:
+    """``{(task, algo): cells}``: the finished cells on current data with a final score in ``phase``, the
+    cells behind each entry of that phase's table."""
+    out: dict[tuple[str, str], list[CellResult]] = {}
     for r in results:
         if r.counts and phase in r.final:
-            table.setdefault((r.task, r.algo), []).append(r.final[phase])
-    return {k: np.asarray(v, np.float64) for k, v in table.items()}
+            out.setdefault((r.task, r.algo), []).append(r)
+    return out
+
+
+def score_table(results: list[CellResult], phase: str) -> dict[tuple[str, str], np.ndarray]:
+    """``{(task, algo): final scores over seeds}`` of finished cells for one phase."""
+    return {k: np.asarray([r.final[phase] for r in cells], np.float64)
+            for k, cells in table_cells(results, phase).items()}
+
+
+def seed_interval(scores, reps: int = 2000, seed: int = 0, confidence: float = 0.95) -> tuple[float, float]:
+    """The percentile-bootstrap interval of the mean score over seeds (one stratum of
+    :func:`d5rl.runner.stats.stratified_bootstrap_ci`); with one seed, that seed's score twice."""
+    _, lo, hi = stats.stratified_bootstrap_ci([np.asarray(scores, np.float64)], np.mean, reps=reps,
+                                              confidence=confidence, rng=np.random.default_rng(seed))
+    return lo, hi
 
 
 def _fmt(x: float, digits: int = 3) -> str:
@@ -174,7 +196,7 @@ def _fmt(x: float, digits: int = 3) -> str:
 
 
 def _table_rows(table: dict, algos: list[str]):
-    tasks = sorted({t for t, _ in table}, key=lambda t: (_env_order(environment(t)), environment(t), t))
+    tasks = sorted({t for t, _ in table}, key=task_order)
     rows = []
     for task in tasks:
         entries = {}
@@ -190,12 +212,30 @@ def _most_seeds(rows) -> int:
     return max((e[2] for _, _, entries in rows for e in entries.values() if e is not None), default=0)
 
 
+def mean_std(mean: float, std: float) -> str:
+    """How every table writes a mean over seeds and its standard deviation: "0.936 ± 0.002"."""
+    return f"{_fmt(mean)} ± {_fmt(std)}"
+
+
 def _entry(e, seeds: int) -> str:
     """One table entry: "mean ± std", "(n=k)" added where fewer seeds stand behind it than behind the
     table's fullest entry (a grid not yet finished), "-" where none."""
     if e is None:
         return "-"
-    return f"{_fmt(e[0])} ± {_fmt(e[1])}" + (f" (n={e[2]})" if e[2] < seeds else "")
+    return mean_std(e[0], e[1]) + (f" (n={e[2]})" if e[2] < seeds else "")
+
+
+def interval(lo: float, hi: float) -> str:
+    """How every table writes a confidence interval: "[0.500, 0.700]"."""
+    return f"[{_fmt(lo)}, {_fmt(hi)}]"
+
+
+def paper_entry(p: tuple[float, float | None] | None) -> str:
+    """The paper's (mean, ±) as the comparison tables write it: "-" where the paper has no entry, the bare
+    mean where it prints no ±."""
+    if p is None:
+        return "-"
+    return _fmt(p[0]) if p[1] is None else mean_std(*p)
 
 
 def _grid_markdown(algos: list[str], rows, cell, label=lambda task: task) -> list[str]:
@@ -212,7 +252,7 @@ def _grid_markdown(algos: list[str], rows, cell, label=lambda task: task) -> lis
 
 
 def table_markdown(table: dict, title: str) -> str:
-    algos = _method_order({a for _, a in table})
+    algos = method_order({a for _, a in table})
     rows = _table_rows(table, algos)
     seeds = _most_seeds(rows)
     lines = _grid_markdown(algos, rows, lambda task, a, e: _entry(e, seeds))
@@ -228,16 +268,14 @@ def comparison_markdown(table: dict, phase: str, title: str) -> str | None:
     the grid, as the one without the paper's does."""
     from d5rl.runner.paper import paper_methods, paper_result, paper_task
 
-    algos = _method_order({a for _, a in table}.union(*(paper_methods(t, phase) for t, _ in table)))
+    algos = method_order({a for _, a in table}.union(*(paper_methods(t, phase) for t, _ in table)))
     rows = _table_rows(table, algos)
     if not any(paper_methods(task, phase) for _, task, _ in rows):
         return None
     seeds = _most_seeds(rows)
 
     def cell(task, a, e):
-        p = paper_result(task, a, phase)
-        paper = "-" if p is None else _fmt(p[0]) + ("" if p[1] is None else f" ± {_fmt(p[1])}")
-        return f"{_entry(e, seeds)} / {paper}"
+        return f"{_entry(e, seeds)} / {paper_entry(paper_result(task, a, phase))}"
 
     def label(task):
         if not paper_methods(task, phase):
@@ -263,6 +301,12 @@ def _duration(seconds: float) -> str:
                                                        else f"{seconds / 3600:.1f} h")
 
 
+def steps_label(cells: list[CellResult]) -> str:
+    """The budgets of some cells: "20,000 + 10,000 online", several joined by commas."""
+    return ", ".join(f"{off:,}" + (f" + {on:,} online" if on else "")
+                     for off, on in sorted({(c.offline_steps, c.online_steps) for c in cells}))
+
+
 def protocol_markdown(results: list[CellResult]) -> str | None:
     """Per task and method, over the cells that count: budget, evaluation, data and wall time."""
     groups: dict[tuple[str, str], list[CellResult]] = {}
@@ -271,25 +315,24 @@ def protocol_markdown(results: list[CellResult]) -> str | None:
             groups.setdefault((r.task, r.algo), []).append(r)
     if not groups:
         return None
-    order = _method_order({a for _, a in groups})
-    keys = sorted(groups, key=lambda k: (_env_order(environment(k[0])), environment(k[0]), k[0], order.index(k[1])))
+    order = method_order({a for _, a in groups})
+    keys = sorted(groups, key=lambda k: (*task_order(k[0]), order.index(k[1])))
     lines = ["### Protocol and cost", "",
              "Per task and method, over the finished cells: gradient steps (then online environment steps), "
              "episodes of the final evaluation, the dataset the cells trained on, and the median wall time of a "
-             "cell over all its sittings (its host and the others running beside it vary; see each cell's `done`; "
-             "'>=': some cells were resumed before runs counted their earlier sittings, so only the last is "
-             "known).", "",
+             "cell summed over the processes that ran it (a cell resumed after a stop has several; its host and the "
+             "others running beside it vary; see each cell's `done`; '>=': some cells were resumed before runs added "
+             "up their processes' times, so only the last one's is known).", "",
              "| Task | Method | Cells | Steps | Final evaluation | Dataset | Wall time per cell |",
              "|---|---|---|---|---|---|---|"]
     for task, algo in keys:
         cells = groups[(task, algo)]
-        steps = ", ".join(f"{off:,}" + (f" + {on:,} online" if on else "")
-                          for off, on in sorted({(c.offline_steps, c.online_steps) for c in cells}))
+        steps = steps_label(cells)
         eps = ", ".join(str(e) for e in sorted({int(c.eval_episodes) for c in cells if c.eval_episodes}))
         data = "; ".join(sorted({_data_label(c.data) for c in cells}))
         walls = [c.wall_s for c in cells if c.wall_s is not None]
         wall = _duration(float(np.median(walls))) if walls else "-"
-        if walls and any(c.wall_is_last_sitting for c in cells):
+        if walls and any(c.wall_is_last_process for c in cells):
             wall = ">= " + wall
         lines.append(f"| {task} | {method_name(algo)} | {len(cells)} | {steps} | "
                      f"{eps + ' episodes' if eps else '-'} | {data} | {wall} |")
@@ -298,7 +341,7 @@ def protocol_markdown(results: list[CellResult]) -> str | None:
 
 BEHAVIOUR_NOTE = (
     "Per task, what the final evaluation's episodes did, from the statistics the task reports per episode, "
-    "averaged over episodes and then over the cells that recorded them (cells from before 2026-11-26 did not). "
+    "averaged over episodes and then over the cells that recorded them (cells trained by older d5rl versions did not). "
     "Kitchen: the fraction of episodes in which each subtask's object reached its goal configuration, counted by "
     "the task or not; WidowX: the object was lifted off the table, ends in its bin, ends in the other bin; A1: "
     "mean forward speed (m/s), episodes that ended early (a fall, or off the course), waypoints reached.")
@@ -314,11 +357,11 @@ def behaviour_table(results: list[CellResult]) -> list[dict]:
         if r.counts and r.stats:
             groups.setdefault(r.task, {}).setdefault(r.algo, []).append(r.stats)
     out = []
-    for task in sorted(groups, key=lambda t: (_env_order(environment(t)), environment(t), t)):
+    for task in sorted(groups, key=task_order):
         by_algo = groups[task]
         keys = sorted(set().union(*(st for cells in by_algo.values() for st in cells)))
         rows = []
-        for algo in _method_order(by_algo):
+        for algo in method_order(by_algo):
             vals = {k: [st[k] for st in by_algo[algo] if k in st] for k in keys}
             rows.append({"algo": algo, "method": method_name(algo), "cells": len(by_algo[algo]),
                          "stats": {k: float(np.mean(v)) if v else None for k, v in vals.items()}})
@@ -345,7 +388,7 @@ def behaviour_markdown(results: list[CellResult]) -> str | None:
 
 
 def table_csv(table: dict) -> str:
-    algos = _method_order({a for _, a in table})
+    algos = method_order({a for _, a in table})
     buf = io.StringIO()
     w = csv.writer(buf)
     w.writerow(["environment", "task"] + [f"{a}_{s}" for a in algos for s in ("mean", "std", "n")])
@@ -361,7 +404,7 @@ def table_csv(table: dict) -> str:
 def aggregate(table: dict, reps: int = 2000, seed: int = 0) -> list[dict]:
     """Per method (overall and per environment): IQM with a 95 % stratified-bootstrap CI, and the mean."""
     out = []
-    algos = _method_order({a for _, a in table})
+    algos = method_order({a for _, a in table})
     envs = sorted({environment(t) for t, _ in table}, key=lambda e: (_env_order(e), e))
     for a in algos:
         groups = [("all", None)] + [(e, e) for e in envs] if len(envs) > 1 else [("all", None)]
@@ -383,7 +426,7 @@ def aggregate_markdown(rows: list[dict], title: str, reps: int) -> str:
              "", "| Method | Group | Tasks | Runs | IQM | 95 % CI | Mean |", "|---|---|---|---|---|---|---|"]
     for r in rows:
         lines.append(f"| {method_name(r['method'])} | {r['group']} | {r['tasks']} | {r['runs']} | {_fmt(r['iqm'])} "
-                     f"| [{_fmt(r['iqm_lo'])}, {_fmt(r['iqm_hi'])}] | {_fmt(r['mean'])} |")
+                     f"| {interval(r['iqm_lo'], r['iqm_hi'])} | {_fmt(r['mean'])} |")
     return "\n".join(lines) + "\n"
 
 
@@ -396,7 +439,7 @@ def mean_curves(cells: list[CellResult]) -> dict[str, tuple[np.ndarray, np.ndarr
     """Per algorithm (paper order), over the cells' seeds: ``(steps, mean score, std score)`` at every
     evaluated step.  ``cells`` should be of one task."""
     out = {}
-    for a in _method_order({c.algo for c in cells}):
+    for a in method_order({c.algo for c in cells}):
         per_step: dict[int, list[float]] = {}
         for c in cells:
             if c.algo != a:
@@ -473,7 +516,7 @@ def write_report(run_dir: Path | str, out_dir: Path | str | None = None, reps: i
                         repr(r.final["online"]) if "online" in r.final else "", r.final_step.get("online", ""),
                         len(r.evals), r.failures, r.stale or ""])
 
-    run_name = run_dir.parent.name if run_dir.name == "cells" else run_dir.name  # docs/results/NAME/cells
+    run_name = run_dir.parent.name if run_dir.name == GRID_FOLDER else run_dir.name
     stale = [r for r in results if r.done and r.stale is not None]
     parts = [f"# Benchmark report: {run_name}", "",
              f"{sum(r.counts for r in results)} of {len(results)} cells finished"

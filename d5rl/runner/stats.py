@@ -67,8 +67,11 @@ def bootstrap_replicates(scores_per_task, statistic: Callable = iqm, reps: int =
             rng = np.random.default_rng(0)
         # one (reps, n_t) index matrix per task; draws are independent across tasks
         draws = [rng.integers(0, s.size, size=(reps, s.size)) for s in strata]
-        if statistic is iqm:  # vectorised: one sorted (reps, N) matrix
-            pooled = np.sort(np.concatenate([s[d] for s, d in zip(strata, draws)], axis=1), axis=1)
+        if statistic is iqm or statistic is np.mean:  # vectorised over one (reps, N) matrix
+            pooled = np.concatenate([s[d] for s, d in zip(strata, draws)], axis=1)
+            if statistic is np.mean:
+                return pooled.mean(axis=1)
+            pooled.sort(axis=1)
             n = pooled.shape[1]
             k = int(0.25 * n)
             return pooled[:, k:n - k].mean(axis=1)

@@ -105,24 +105,24 @@ def test_a_state_twin_is_compared_with_its_camera_task():
     assert paper_result("toy-reach-v0", "bc", "offline") is None
 
 
-def test_wall_time_counts_every_sitting(tmp_path):
-    """A cell's wall time is its run's over all sittings; for older runs that only know the last sitting's,
-    the protocol table says it is a lower bound."""
+def test_wall_time_counts_every_process(tmp_path):
+    """A cell's wall time is its run's summed over the processes that ran it; for older runs that only know the
+    last process's, the protocol table says it is a lower bound."""
     from d5rl.runner.report import collect, protocol_markdown
 
-    for seed, (summary, sittings) in enumerate([({"run_wall_s": 600.0, "episodes": 5}, 2),
+    for seed, (summary, processes) in enumerate([({"run_wall_s": 600.0, "episodes": 5}, 2),
                                                 ({"episodes": 5}, 1)]):
         cell = Cell("a1-walk-v0", "bc", seed, 100, 0)
         cdir = cell.directory(tmp_path)
         write_cell_file(cell, cdir)
         (cdir / "metrics.jsonl").write_text(json.dumps({"step": 100, "eval/a1-walk-v0/score": 0.5}) + "\n")
-        (cdir / "log.txt").write_text("".join(f"=== {cell.key} attempt 1 on vm pid {i} at now\n" for i in range(sittings)))
+        (cdir / "log.txt").write_text("".join(f"=== {cell.key} attempt 1 on vm pid {i} at now\n" for i in range(processes)))
         (cdir / "done").write_text(json.dumps({"wall_s": 300.0, "summary": summary}))
     walls = sorted(c.wall_s for c in collect(tmp_path))
-    assert walls == [300.0, 600.0]  # the run's total where known, not the last sitting's 300 s
+    assert walls == [300.0, 600.0]  # the run's total where known, not the last process's 300 s
     assert "| 7.5 min |" in protocol_markdown(collect(tmp_path))  # the median, no lower-bound mark
     (cell.directory(tmp_path) / "log.txt").write_text(f"=== {cell.key} attempt 1 a\n=== {cell.key} attempt 1 b\n")
-    assert "| >= 7.5 min |" in protocol_markdown(collect(tmp_path))  # seed 1 was resumed: 300 s is its last sitting
+    assert "| >= 7.5 min |" in protocol_markdown(collect(tmp_path))  # seed 1 was resumed: 300 s is its last process's
 
 
 def test_what_the_agents_do_from_their_episode_stats(tmp_path):

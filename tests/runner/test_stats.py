@@ -86,3 +86,10 @@ def test_rliable_agrees_if_installed():
     rly = pytest.importorskip("rliable.metrics")
     x = np.random.default_rng(3).normal(size=(5, 4))
     assert iqm(x) == pytest.approx(rly.aggregate_iqm(x))
+
+
+def test_vectorised_mean_equals_the_statistic_applied_to_each_resample():
+    strata = [np.array([0.0, 0.4, 1.0]), np.array([0.3, 2.0])]
+    fast = bootstrap_replicates(strata, np.mean, reps=500, rng=np.random.default_rng(3))
+    slow = bootstrap_replicates(strata, lambda x: float(np.mean(x)), reps=500, rng=np.random.default_rng(3))
+    np.testing.assert_allclose(fast, slow, atol=1e-12)
