@@ -3,8 +3,13 @@
     d5rl browse &                                  # with the datasets you want to show
     python scripts/browse_screenshots.py http://127.0.0.1:8765/#/task/a1-walk-v0/episode/0 docs/img/browse-episode.png
 
+    d5rl browse docs/results/table1-state/cells docs/results/table1-pixels/cells docs/results/a1-o2o/cells &
+    python scripts/browse_screenshots.py http://127.0.0.1:8765/#/runs docs/img/browse-runs.png \
+        --element 'section.task-runs[data-task="a1-walk-v0"]'
+
 Waits until the view's frames and plots are drawn (``--frame N`` scrubs to frame N first), then
-writes a PNG (optimized with Pillow; ``--width``/``--height`` set the window).
+writes a PNG of the window, or of one element of the page (``--element SELECTOR``), optimized with Pillow
+(``--width``/``--height`` set the window).
 """
 
 from __future__ import annotations
@@ -26,6 +31,7 @@ def main() -> None:
     p.add_argument("url")
     p.add_argument("out")
     p.add_argument("--frame", type=int, help="scrub an episode view to this frame")
+    p.add_argument("--element", help="CSS selector of the one element to capture (default: the window)")
     p.add_argument("--width", type=int, default=1280)
     p.add_argument("--height", type=int, default=900)
     p.add_argument("--colors", type=int, default=128, help="palette size of the PNG (smaller file)")
@@ -43,7 +49,7 @@ def main() -> None:
                 page.fill("#scrubber", str(args.frame))
                 page.dispatch_event("#scrubber", "input")
         page.wait_for_timeout(1500)  # plots finish drawing
-        png = page.screenshot()
+        png = page.locator(args.element).screenshot() if args.element else page.screenshot()
         ctx.close()
     Image.open(io.BytesIO(png)).convert("RGB").quantize(args.colors).save(args.out, optimize=True)
     print(f"wrote {args.out}")

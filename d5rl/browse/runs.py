@@ -1,5 +1,6 @@
 """``d5rl bench`` run directories for the browse page: read with :func:`d5rl.runner.report.collect` (the
-report's own reader), summarized as learning curves, score tables and rollout videos."""
+report's own reader), summarized as per-task comparison tables (with the paper's values), learning curves,
+final scores per seed, what the agents did and rollout videos."""
 
 from __future__ import annotations
 
@@ -8,11 +9,53 @@ from pathlib import Path
 
 from d5rl.browse.catalog import json_floats
 from d5rl.runner import report
+from d5rl.runner.paper import paper_result, paper_task
+
+def run_labels(run_dirs: list[Path]) -> list[str]:
+    """A name for each run directory that tells it from the others: its path relative to the directories'
+    common parent.  A label that would be the bare grid folder (``cells``) keeps the folder above it, so
+    ``docs/results/table1-state/cells`` alone is ``table1-state/cells``; a directory given twice gets
+    ``#2``, ``#3``... after its label."""
+    dirs = [Path(os.path.abspath(r)) for r in run_dirs]
+    if not dirs:
+        return []
+    base = Path(os.path.commonpath([d.parent for d in dirs]))
+    labels = [os.path.relpath(d, base) for d in dirs]
+    if report.GRID_FOLDER in labels and base.parent != base:
+        labels = [os.path.relpath(d, base.parent) for d in dirs]
+    seen: dict[str, int] = {}
+    out = []
+    for lab in labels:
+        seen[lab] = seen.get(lab, 0) + 1
+        out.append(lab if seen[lab] == 1 else f"{lab} #{seen[lab]}")
+    return out
+
+
+def comparison_rows(results: list[report.CellResult], phase: str) -> list[dict]:
+    """One row per (task, algorithm) of the phase's table, in the report's order: the seeds' final scores,
+    their mean ± std (as the report writes them), the bootstrap interval of the mean
+    (:func:`report.seed_interval`) and the paper's (mean, ±) for the task's row, or None."""
+    table = report.table_cells(results, phase)
+    order = report.method_order({a for _, a in table})
+    rows = []
+    for task, algo in sorted(table, key=lambda k: (*report.task_order(k[0]), order.index(k[1]))):
+        cells = table[(task, algo)]
+        scores = report.score_table(cells, phase)[(task, algo)]
+        lo, hi = report.seed_interval(scores)
+        paper = paper_result(task, algo, phase)
+        rows.append({"environment": report.environment(task), "task": task, "algo": algo,
+                     "method": report.method_name(algo), "n": int(scores.size), "mean": float(scores.mean()),
+                     "std": float(scores.std()), "text": report.mean_std(scores.mean(), scores.std()),
+                     "ci": [lo, hi], "ci_text": report.interval(lo, hi), "seeds": [c.seed for c in cells],
+                     "scores": json_floats(scores), "steps": report.steps_label(cells),
+                     "paper_task": paper_task(task), "paper": None if paper is None else list(paper),
+                     "paper_text": report.paper_entry(paper)})
+    return rows
 
 
 def run_summary(run_dir: Path) -> dict:
-    """Cells, mean learning curves per (task, algorithm), final-score tables, what the agents did (the tasks'
-    episode statistics) and videos of one run."""
+    """Cells, per-phase comparison tables, mean learning curves per (task, algorithm), what the agents did
+    (the tasks' episode statistics) and videos of one run."""
     run_dir = Path(run_dir)
     results = report.collect(run_dir)
     by_task: dict[str, list] = {}
@@ -27,14 +70,16 @@ def run_summary(run_dir: Path) -> dict:
                            "seeds": len({c.seed for c in cells if c.algo == algo})})
     tables = {}
     for phase in ("offline", "online"):
-        table = report.score_table(results, phase)
-        if table:
-            tables[phase] = [{"environment": report.environment(t), "task": t, "algo": a,
-                              "method": report.method_name(a), "mean": float(v.mean()), "std": float(v.std()),
-                              "n": int(v.size)} for (t, a), v in sorted(table.items())]
+        rows = comparison_rows(results, phase)
+        if rows:
+            tables[phase] = rows
     cells = [{"task": r.task, "algo": r.algo, "method": report.method_name(r.algo), "seed": r.seed, "done": r.done,
               "final": r.final, "evaluations": len(r.evals), "failures": r.failures,
               "videos": [os.path.relpath(v, run_dir) for v in r.videos[-report.VIDEOS_PER_CELL:]]}
              for r in sorted(results, key=lambda r: (r.task, r.algo, r.seed))]
     return {"name": run_dir.name, "path": str(run_dir), "cells": cells, "curves": curves, "tables": tables,
+            "tasks": [{"task": t, "environment": report.environment(t)}
+                      for t in sorted({r.task for r in results}, key=report.task_order)],
+            "environments": [label for _, label in report.ENVIRONMENTS],
+            "methods": report.method_order({r.algo for r in results}),
             "behaviour": report.behaviour_table(results), "behaviour_note": report.BEHAVIOUR_NOTE}

@@ -50,6 +50,7 @@ def create_app(run_dirs: list[Path] | None = None):
     from d5rl.errors import DatasetNotFoundError, TaskIdError, UnknownTaskError
 
     run_dirs = [Path(r).resolve() for r in (run_dirs or [])]
+    run_labels = runs.run_labels(run_dirs)
     datasets = catalog.Datasets()
     frames = Frames(datasets)
     plotly = plotly_js()
@@ -91,8 +92,9 @@ def create_app(run_dirs: list[Path] | None = None):
         return FileResponse(STATIC / "index.html")
 
     def tasks(request):
-        return JSONResponse({"tasks": catalog.all_tasks(), "runs": [{"index": k, "name": r.name, "path": str(r)}
-                                                                     for k, r in enumerate(run_dirs)]})
+        return JSONResponse({"tasks": catalog.all_tasks(),
+                             "runs": [{"index": k, "name": r.name, "label": run_labels[k], "path": str(r)}
+                                      for k, r in enumerate(run_dirs)]})
 
     def task(request):
         return JSONResponse(catalog.task_summary(task_id(request)))
@@ -123,7 +125,8 @@ def create_app(run_dirs: list[Path] | None = None):
 
     def run(request):
         d = run_dir(request)
-        return JSONResponse({"index": index_of(request, "run"), **runs.run_summary(d)})
+        k = index_of(request, "run")
+        return JSONResponse({"index": k, "label": run_labels[k], **runs.run_summary(d)})
 
     def run_file(request):
         path = file_under(run_dir(request), request.path_params["path"], tuple(VIDEO_TYPES))

@@ -161,13 +161,17 @@ def _run_dir(root: Path) -> Path:
 def test_runs_curves_tables_and_videos(tmp_path):
     run = _run_dir(tmp_path / "run")
     c = client([run])
-    assert c.get("/api/tasks").json()["runs"] == [{"index": 0, "name": "run", "path": str(run.resolve())}]
+    assert c.get("/api/tasks").json()["runs"] == [{"index": 0, "name": "run", "label": "run",
+                                                   "path": str(run.resolve())}]
     body = c.get("/api/runs/0").json()
     (curve,) = body["curves"]
     assert curve["steps"] == [50, 100] and curve["seeds"] == 2
     np.testing.assert_allclose(curve["mean"], [0.2, 0.6]) and np.testing.assert_allclose(curve["std"], [0.1, 0.1])
     (row,) = body["tables"]["offline"]
     assert row["n"] == 2 and row["mean"] == pytest.approx(0.6) and row["std"] == pytest.approx(0.1)
+    assert row["text"] == "0.600 ± 0.100" and row["scores"] == [0.5, 0.7] and row["seeds"] == [0, 1]
+    assert row["ci"] == [0.5, 0.7] and row["ci_text"] == "[0.500, 0.700]"  # resampled means: 0.5, 0.6 or 0.7
+    assert row["paper"] is None and row["paper_text"] == "-" and row["steps"] == "100"
     (what,) = body["behaviour"]  # the task's episode stats, mean over the two seeds
     assert what["task"] == "toy-reach-v0" and what["rows"][0]["cells"] == 2
     assert what["rows"][0]["stats"]["reached"] == pytest.approx(0.5)
@@ -234,3 +238,14 @@ def test_serve_refuses_a_bad_port_or_host_in_one_line(host, port, needle):
 
     with pytest.raises(D5RLError, match=needle.replace("-", r"\-")):
         serve(host, port, [])
+
+
+def test_run_labels_tell_grids_apart(tmp_path):
+    from d5rl.browse.runs import run_labels
+
+    a, b = tmp_path / "results/table1-state/cells", tmp_path / "results/a1-o2o/cells"
+    assert run_labels([a, b]) == ["table1-state/cells", "a1-o2o/cells"]  # both folders are named cells
+    assert run_labels([a]) == ["table1-state/cells"]  # a bare "cells" keeps the folder above it
+    assert run_labels([tmp_path / "runs/mine"]) == ["mine"]
+    assert run_labels([a, tmp_path / "runs/x/cells"]) == ["results/table1-state/cells", "runs/x/cells"]
+    assert run_labels([a, a]) == ["table1-state/cells", "table1-state/cells #2"]

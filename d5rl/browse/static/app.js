@@ -53,10 +53,16 @@ async function tasksView() {
     "status", "size on disk", "score refs (random / expert return)"].map((c) => h("th", { text: c }))), rows));
 }
 
+function titledPlot(title, cls) {
+  // the title is HTML above the plot, so Plotly's tool bar (top right of the plot) cannot cover it
+  const div = h("div", { class: `plot ${cls}` });
+  return [h("div", { class: "plot-box" }, h("div", { class: "plot-title", text: title }), div), div];
+}
+
 // --- one task: its dataset ------------------------------------------------------------------------
 function barPlot(div, p) {
   Plotly.newPlot(div, [{ type: "bar", x: p.x, y: p.y, width: p.width, marker: { color: "#4c78a8" } }], {
-    title: { text: p.title, font: { size: 12 } }, margin: { l: 50, r: 10, t: 30, b: 40 },
+    margin: { l: 50, r: 10, t: 30, b: 40 },
     xaxis: { title: { text: p.xlabel } }, yaxis: { title: { text: p.ylabel } }, bargap: p.width ? 0.02 : 0.2,
   }, PLOT_CONFIG);
 }
@@ -85,7 +91,7 @@ async function taskView(task) {
   app.append(table);
   const [ov, eps] = await Promise.all([api(`/api/tasks/${enc(task)}/overview`), api(`/api/tasks/${enc(task)}/episodes`)]);
   grid.replaceChildren();
-  for (const p of ov.plots) { const div = h("div", { class: "plot" }); grid.append(div); barPlot(div, p); }
+  for (const p of ov.plots) { const [box, div] = titledPlot(p.title, ""); grid.append(box); barPlot(div, p); }
   episodeTable(table, t.id, eps);
 }
 
@@ -148,7 +154,9 @@ async function episodeView(task, index) {
     const traces = p.series.map((s, j) => p.kind === "flags"
       ? { x, y: s.y.map((v) => (v == null ? null : j + 0.8 * v)), name: s.name, mode: "lines", line: { shape: "hv" } }
       : { x, y: s.y, name: s.name, mode: "lines", yaxis: s.axis === "y2" ? "y2" : "y" });
-    const layout = { title: { text: p.title + (p.align === "transition" ? " (per transition t: frame t → t+1)" : " (per frame)"), font: { size: 12 } },
+    // left-aligned: Plotly's tool bar sits at the top right
+    const layout = { title: { text: p.title + (p.align === "transition" ? " (per transition t: frame t → t+1)" : " (per frame)"),
+      font: { size: 12 }, x: 0, xanchor: "left", xref: "paper" },
       margin: { l: p.kind === "flags" || p.value_labels ? 110 : 50, r: 60, t: 28, b: 28 }, xaxis: { range: [0, T] }, legend: { font: { size: 10 } }, showlegend: p.series.length > 1 };
     if (p.series.some((s) => s.axis === "y2")) layout.yaxis2 = { overlaying: "y", side: "right", title: { text: "return" } };
     if (p.kind === "flags") layout.yaxis = { tickvals: p.series.map((_, j) => j), ticktext: p.series.map((s) => s.name) };
@@ -187,6 +195,40 @@ async function episodeView(task, index) {
 }
 
 // --- benchmark runs ---------------------------------------------------------------------------------
+// Per task: a table of every agent of every run next to the paper's value (sortable, best mean highlighted),
+// learning curves for agents evaluated more than once, final scores per seed for the others.
+const COLORS = ["#4c78a8", "#f58518", "#54a24b", "#e45756", "#72b7b2", "#b279a2", "#ff9da6", "#9d755d", "#eeca3b", "#79706e"];
+const DASHES = ["solid", "dash", "dot", "dashdot", "longdash"];
+const SYMBOLS = ["circle", "square", "diamond", "triangle-up", "cross"];
+
+function compareTable(task, phase, entries) {
+  const best = Math.max(...entries.map((e) => e.row.mean));
+  const cols = [
+    ["agent", (e) => e.label, (e) => e.label],
+    ["steps", (e) => e.row.steps, (e) => e.row.steps],
+    ["seeds", (e) => String(e.row.n), (e) => e.row.n],
+    ["mean ± std", (e) => e.row.text, (e) => e.row.mean],
+    ["95% CI of the mean", (e) => e.row.ci_text, (e) => e.row.ci[0]],
+    [`paper (${entries[0].row.paper_task})`, (e) => e.row.paper_text, (e) => (e.row.paper ? e.row.paper[0] : null)],
+  ];
+  let key = 3, desc = true;
+  const table = h("table", { class: "scores compare", "data-task": task, "data-phase": phase });
+  const render = () => {
+    const get = cols[key][2];
+    const order = [...entries].sort((a, b) => {
+      const x = get(a), y = get(b);
+      const c = typeof x === "string" ? x.localeCompare(y) : (x ?? -Infinity) - (y ?? -Infinity);
+      return desc ? -c : c;
+    });
+    table.replaceChildren(h("tr", {}, cols.map(([c], j) => h("th", { class: "sortable", "data-col": c,
+      text: c + (j === key ? (desc ? " ▼" : " ▲") : ""), onclick: () => { desc = j === key ? !desc : j !== 0; key = j; render(); } }))),
+      ...order.map((e) => h("tr", { class: e.row.mean === best ? "best" : "", "data-run": e.run.label, "data-algo": e.row.algo },
+        cols.map(([c, text]) => h("td", { text: text(e) })))));
+  };
+  render();
+  return table;
+}
+
 async function runsView() {
   const { runs } = await api("/api/tasks");
   app.replaceChildren(h("h1", { text: "Benchmark runs" }));
@@ -196,41 +238,81 @@ async function runsView() {
     return;
   }
   const all = await Promise.all(runs.map((r) => api(`/api/runs/${r.index}`)));
-  const label = (run, c) => (all.length > 1 ? `${run.name}: ${c.method}` : c.method);
-  const tasks = [...new Set(all.flatMap((r) => r.curves.map((c) => c.task)))].sort();
-  app.append(h("h2", { text: "Learning curves (normalized score, mean ± std over seeds)" }));
-  const grid = h("div", { class: "grid" });
-  app.append(grid);
+  const label = (run, method) => (all.length > 1 ? `${run.label}: ${method}` : method);
+  const methods = [...new Set(all.flatMap((r) => r.methods))];
+  const envs = all[0].environments;
+  const envOf = Object.fromEntries(all.flatMap((r) => r.tasks.map((t) => [t.task, t.environment])));
+  const envRank = (e) => (envs.includes(e) ? envs.indexOf(e) : envs.length);
+  const tasks = Object.keys(envOf).sort((a, b) => envRank(envOf[a]) - envRank(envOf[b]) ||
+    envOf[a].localeCompare(envOf[b]) || a.localeCompare(b));
+  app.append(h("p", { class: "muted", text: "Per task, each agent's final normalized score: mean ± std over seeds " +
+    "(as in the run's report.md), the 95% bootstrap interval of the mean over seeds, and the paper's mean ± std " +
+    "for the task's row (500k steps on the paper's own data; a -state task is compared with its camera task). " +
+    "Click a column to sort; the best mean is highlighted. " +
+    (all.length > 1 ? "Agents are named by their run's path relative to the runs' common folder, then the method. " : "") +
+    "Plots: learning curves where an agent was evaluated more than once, otherwise its final score per seed." }));
+  const style = (run, algo) => ({ color: COLORS[methods.indexOf(algo) % COLORS.length],
+    dash: DASHES[run.index % DASHES.length], symbol: SYMBOLS[run.index % SYMBOLS.length] });
   for (const task of tasks) {
-    const traces = [];
-    all.forEach((run) => run.curves.filter((c) => c.task === task).forEach((c) => {
-      const name = label(run, c);
-      traces.push({ x: c.steps.concat([...c.steps].reverse()), y: c.mean.map((m, i) => m + c.std[i]).concat(c.mean.map((m, i) => m - c.std[i]).reverse()),
-        fill: "toself", line: { width: 0 }, opacity: 0.2, showlegend: false, hoverinfo: "skip", legendgroup: name });
-      traces.push({ x: c.steps, y: c.mean, name: `${name} (${c.seeds} seeds)`, mode: "lines+markers", legendgroup: name });
-    }));
-    const d = h("div", { class: "plot curve" });
-    grid.append(d);
-    Plotly.newPlot(d, traces, { title: { text: task, font: { size: 12 } }, margin: { l: 50, r: 10, t: 30, b: 40 },
-      xaxis: { title: { text: "steps" } }, yaxis: { title: { text: "normalized score" } }, legend: { font: { size: 9 } } }, PLOT_CONFIG);
-  }
-  for (const phase of ["offline", "online"]) {
-    const cols = all.flatMap((run) => [...new Set((run.tables[phase] || []).map((r) => r.algo))].map((a) => [run, a]));
-    if (!cols.length) continue;
-    const rowsTasks = [...new Set(all.flatMap((run) => (run.tables[phase] || []).map((r) => r.task)))].sort();
-    app.append(h("h2", { text: `Final ${phase} score (mean ± std over seeds)` }));
-    app.append(h("table", { class: "scores" }, h("tr", {}, h("th", { text: "task" }),
-      cols.map(([run, a]) => h("th", { text: label(run, { method: run.tables[phase].find((r) => r.algo === a).method }) }))),
-      rowsTasks.map((t) => h("tr", {}, h("td", { text: t }), cols.map(([run, a]) => {
-        const r = run.tables[phase].find((x) => x.task === t && x.algo === a);
-        return h("td", { text: r ? `${num(r.mean)} ± ${num(r.std)} (n=${r.n})` : "–" });
-      })))));
+    const section = h("section", { class: "task-runs", "data-task": task });
+    section.append(h("h2", { text: task }, h("span", { class: "muted", text: `  ${envOf[task]}` })));
+    const body = h("div", { class: "task-body" });
+    const tables = h("div", { class: "tables" });
+    body.append(tables);
+    section.append(body);
+    app.append(section);
+    const last = {};  // agent key -> its entry of the last phase, for the dot plot
+    const phases = ["offline", "online"].filter((ph) => all.some((run) => (run.tables[ph] || []).some((r) => r.task === task)));
+    for (const phase of phases) {
+      const entries = all.flatMap((run) => (run.tables[phase] || []).filter((r) => r.task === task)
+        .map((row) => ({ run, row, phase, label: label(run, row.method) })));
+      for (const e of entries) last[`${e.run.index}/${e.row.algo}`] = e;
+      tables.append(h("h3", { text: phase === "offline" ? "Final offline score" : "After online fine-tuning" }),
+        compareTable(task, phase, entries));
+    }
+    const curves = all.flatMap((run) => run.curves.filter((c) => c.task === task).map((c) => ({ run, c })));
+    const multi = curves.filter(({ c }) => c.steps.length > 1);
+    if (multi.length) {
+      const [box, div] = titledPlot("Learning curves (mean ± std over seeds)", "curve");
+      body.append(box);
+      const traces = [];
+      for (const { run, c } of multi) {
+        const name = `${label(run, c.method)} (${c.seeds} seeds)`, st = style(run, c.algo);
+        traces.push({ x: c.steps.concat([...c.steps].reverse()), y: c.mean.map((m, i) => m + c.std[i]).concat(c.mean.map((m, i) => m - c.std[i]).reverse()),
+          fill: "toself", line: { width: 0 }, fillcolor: st.color, opacity: 0.15, showlegend: false, hoverinfo: "skip", legendgroup: name });
+        traces.push({ x: c.steps, y: c.mean, name, mode: "lines+markers", legendgroup: name,
+          line: { color: st.color, dash: st.dash }, marker: { symbol: st.symbol, size: 5 } });
+      }
+      Plotly.newPlot(div, traces, { margin: { l: 50, r: 10, t: 30, b: 40 }, xaxis: { title: { text: "steps" } },
+        yaxis: { title: { text: "normalized score" } }, legend: { font: { size: 9 } } }, PLOT_CONFIG);
+    }
+    const single = curves.filter(({ c }) => c.steps.length <= 1).map(({ run, c }) => last[`${run.index}/${c.algo}`]).filter(Boolean);
+    if (single.length) {
+      const [box, div] = titledPlot("Final score per seed (one evaluation per run)", "dots");
+      body.append(box);
+      // one row per agent (horizontal, so that long run labels stay readable), a dot per seed, a tick at the paper's mean
+      const rowLabel = (e) => (phases.length > 1 ? `${e.label} (${e.phase})` : e.label);
+      const traces = single.map((e) => {
+        const st = style(e.run, e.row.algo);
+        return { type: "scatter", mode: "markers", name: e.label, y: e.row.scores.map(() => rowLabel(e)), x: e.row.scores,
+          text: e.row.seeds.map((s) => `seed ${s}`), hovertemplate: "%{text}: %{x:.3f}<extra>%{y}</extra>",
+          marker: { color: st.color, symbol: st.symbol, size: 9, opacity: 0.8 }, showlegend: false };
+      });
+      const paper = single.filter((e) => e.row.paper);
+      if (paper.length) traces.push({ type: "scatter", mode: "markers", name: "paper's mean", y: paper.map(rowLabel),
+        x: paper.map((e) => e.row.paper[0]), marker: { symbol: "line-ns-open", size: 16, color: "#222", line: { width: 2 } },
+        hovertemplate: "paper: %{x:.3f}<extra>%{y}</extra>" });
+      div.style.height = `${90 + 22 * single.length}px`;
+      Plotly.newPlot(div, traces, { margin: { l: 10, r: 10, t: 30, b: 40 }, xaxis: { title: { text: "normalized score" }, zeroline: true },
+        yaxis: { automargin: true, autorange: "reversed", tickfont: { size: 10 } },
+        legend: { orientation: "h", x: 0, y: 1.02, yanchor: "bottom", font: { size: 10 } } }, PLOT_CONFIG);
+    }
   }
   const behaviour = all.flatMap((run) => (run.behaviour || []).map((t) => [run, t]));
   if (behaviour.length) {
     app.append(h("h2", { text: "What the agents do (final evaluation)" }), h("p", { class: "muted", text: all[0].behaviour_note }));
     for (const [run, t] of behaviour) {
-      app.append(h("h3", { text: all.length > 1 ? `${run.name}: ${t.task}` : t.task }));
+      app.append(h("h3", { text: all.length > 1 ? `${run.label}: ${t.task}` : t.task }));
       app.append(h("table", { class: "scores" }, h("tr", {}, h("th", { text: "method" }), h("th", { text: "cells" }),
         t.labels.map((l) => h("th", { text: l }))),
         t.rows.map((r) => h("tr", {}, h("td", { text: r.method }), h("td", { text: String(r.cells) }),
@@ -243,7 +325,7 @@ async function runsView() {
     app.append(h("div", { class: "grid" }, videos.map(([run, c, v]) => h("div", { class: "camera" },
       v.endsWith(".gif") ? h("img", { src: `/api/runs/${run.index}/files/${v.split("/").map(enc).join("/")}` })
         : h("video", { controls: "", preload: "metadata", src: `/api/runs/${run.index}/files/${v.split("/").map(enc).join("/")}` }),
-      h("div", { text: `${label(run, c)} · ${c.task} · seed ${c.seed} · ${v.split("/").pop()}` })))));
+      h("div", { text: `${label(run, c.method)} · ${c.task} · seed ${c.seed} · ${v.split("/").pop()}` })))));
   }
 }
 
