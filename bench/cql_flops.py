@@ -10,11 +10,11 @@ target: the "floor" below is exactly those critic-MLP forward and backward matri
 Ratio = update time / floor: 1.0 would mean everything else (actor, sampling, log-sum-exp,
 Adam) is free.
 
-Tried and measured (2-core AMD EPYC, 2026-11-23): computing the observation part of the critics'
-first layer once per state instead of once per sampled action (features @ K_f + actions @ K_a,
-17% fewer FLOPs) made the critic's forward + backward 1.4x *slower* on XLA:CPU (257-264 vs
-365-384 ms: a broadcast add of a (30, 256, 256) tensor and a K=12 matrix product cost more than
-the FLOPs saved), so CQL keeps the concatenated form.
+Why CQL's critics take the concatenated (observation, action) input: computing the observation part of
+the first layer once per state instead of once per sampled action (features @ K_f + actions @ K_a,
+17% fewer FLOPs) makes the critic's forward + backward 1.4x *slower* on XLA:CPU (2-core x86 CPU:
+257-264 vs 365-384 ms; a broadcast add of a (30, 256, 256) tensor and a K=12 matrix product cost more
+than the FLOPs saved).
 """
 
 from __future__ import annotations

@@ -1,10 +1,10 @@
 #!/bin/bash
-# Table 1 cells on a bare GPU machine with no network (the README's GPU runs, issues 20 and 21): pixel cells,
+# Table 1 cells on a bare GPU machine with no network (docs/gpu.md): pixel cells,
 # and state cells whose agents are too slow for a 2-core CPU (CQL, CalQL, FQL: 13-19 updates/s there; RLPD 5.6,
 # its 20 critic updates a step):
 #   STEPS=3000 BUDGET=545 bash scripts/gpu_bench.sh   # the randomized kitchen from its cameras, 100 episodes
 #   CELLS="wx-sorting-v0:bc,iql:16:4 kitchen-standard-mixed-v0:iql:12:2" BUDGET=560 bash scripts/gpu_bench.sh
-#   A=fql,cql,calql,idql,ddpm_bc,rebrac,iql,td3bc,bc   # WidowX from state (README, "Table 1 from state")
+#   A=fql,cql,calql,idql,ddpm_bc,rebrac,iql,td3bc,bc   # WidowX from state (docs/results.md, "Table 1 from state")
 #   SEEDS=0-2 STEPS=10000 CELLS="wx-sorting-state-v0:$A:16:8 wx-sorting-pickplacedata-state-v0:$A:16:8" \
 #     BUDGET=520 bash scripts/gpu_bench.sh
 #   CELLS="a1-walk-v0:cql,calql:2:8:final_eval_episodes=20 ..."   # A1 (state), with its 20-episode evaluation
@@ -13,8 +13,8 @@
 # and STEPS (5000) are the grid's seeds and offline steps, or an entry's own with seeds=0-2,steps=10000
 # among its SETs (pixel and state entries in one call); pixel cells also get the execution-only settings
 # below.  Call it again on the same (still warm) machine to go on: packages, data and cells live in .dwork/ of
-# the checkout, which .gitignore names so that the device keeps it between calls (on 2026-11-26 it was ignored
-# only in .git/info/exclude, which does not travel, and the second call found it gone), so a second call skips
+# the checkout, which .gitignore names so that the device keeps it between calls (a path ignored only in
+# .git/info/exclude does not travel, and a second call would find it gone), so a second call skips
 # what is done and resumes unfinished cells from their checkpoints.  LOCAL=1 skips the machine setup (a dry run
 # here; CELLS and STEPS make it small).  GRID=docs/results/table1-state/cells (a grid's cells folder in the
 # checkout, which travels with it) makes each entry skip the cells that grid has finished, as `d5rl bench` does
@@ -43,7 +43,7 @@ if [ -z "$LOCAL" ]; then
 fi
 python3 -c "import jax, flax, optax, mujoco, numpy; print('versions', jax.__version__, flax.__version__, optax.__version__, mujoco.__version__, numpy.__version__, jax.devices())" || exit 4
 # the default: the randomized kitchen's 4 cells side by side on the first 100 play episodes, evaluated on 50
-# episodes like the other pixel rows (its family's protocol says 100: ~2 more minutes a cell on a lease)
+# episodes like the other pixel rows (its family's protocol says 100: ~2 more minutes a cell on one H100)
 CELLS=${CELLS:-"kitchen-randomized-mixed-v0:bc,iql:16:4:dataset_episodes=100,final_eval_episodes=50"}
 # dataset_in_memory_gb: the frames are decoded into RAM once (wx-sorting: 12 GB a cell) instead of at every
 # batch; checkpoint_interval: a call cut short loses at most 1,000 steps a cell; eval_processes: the final

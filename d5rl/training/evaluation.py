@@ -163,14 +163,14 @@ class EvalProgress:
     the step and a hash of the agent's arrays); otherwise, or when the file is damaged, it starts at episode 1.  Each
     episode's result does not depend on which episodes ran beside it or before it, so a resumed evaluation
     returns the same numbers as an unbroken one.  The file is removed when the evaluation finishes.  It also
-    keeps the wall seconds its episodes took over all sittings (``wall_s``); after :meth:`load`, ``earlier_s``
-    is the part spent in earlier sittings, which a resumed run adds to its wall time (a 100-episode IDQL
-    evaluation killed at episode 75 had 70 minutes of it)."""
+    keeps the wall seconds its episodes took over every process that worked on it (``wall_s``); after
+    :meth:`load`, ``earlier_s`` is the part spent by earlier processes, which a resumed run adds to its wall
+    time (a long evaluation stopped near its end holds most of a cell's time)."""
 
     def __init__(self, path: str | Path, identity: dict[str, Any]):
         self.path, self.identity = Path(path), dict(identity)
-        self.earlier_s = 0.0  # wall seconds the loaded episodes took in earlier sittings
-        self._since = time.monotonic()  # when this sitting's part of the evaluation began
+        self.earlier_s = 0.0  # wall seconds the loaded episodes took in earlier processes
+        self._since = time.monotonic()  # when this process's part of the evaluation began
 
     def _header(self, evaluation: dict[str, Any]) -> dict[str, Any]:
         return {"format": PROGRESS_FORMAT, **evaluation, **self.identity}

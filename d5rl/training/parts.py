@@ -42,11 +42,11 @@ class RunState:
     metric_sums: dict = dataclasses.field(default_factory=dict)  # metrics since the last log row, times updates
     metric_count: int = 0  # updates in metric_sums
     buffer: ReplayBuffer | None = None  # the online replay buffer
-    elapsed_before: float = 0.0  # wall seconds the run had spent in earlier sittings, up to their last checkpoint
-    started: float = dataclasses.field(default_factory=lambda: time.monotonic())  # this sitting's start (not saved)
+    elapsed_before: float = 0.0  # wall seconds the run had spent in earlier processes, up to their last checkpoint
+    started: float = dataclasses.field(default_factory=lambda: time.monotonic())  # this process's start (not saved)
 
     def elapsed(self) -> float:
-        """Wall seconds of the run over all its sittings (work after a sitting's last checkpoint is lost and
+        """Wall seconds of the run over every process that ran it (work after a process's last checkpoint is lost and
         not counted, but for an evaluation's finished episodes, which a resumed evaluation keeps)."""
         return self.elapsed_before + time.monotonic() - self.started
 
@@ -181,7 +181,7 @@ class Evaluator:
         self.logger, self.run_dir = logger, run_dir
 
     def __call__(self, agent, state: RunState, episodes: int) -> dict[str, Any]:
-        """Evaluate ``agent`` at ``state.step``; an evaluation resumed from an earlier sitting adds that sitting's
+        """Evaluate ``agent`` at ``state.step``; an evaluation resumed from an earlier process adds that process's
         time on it to the run's wall time (``state.elapsed_before``)."""
         step = state.step
         video = self.run_dir / "videos" / f"step{step:09d}.mp4" if self.cfg.save_video else None

@@ -21,7 +21,7 @@ def test_results_always_come_then_the_best_then_unfinished_checkpoints(tmp_path,
     cells = expand_grid(["toy-reach-v0"], ["bc"], [0, 1, 2], 16, 0, job=DEFAULT_JOB, overrides=PROTOCOL)
     assert not run_bench(cells, run, workers=0, progress=False).failed
     unfinished = cells[2].directory(run)
-    (unfinished / DONE_FILE).unlink()  # as if the lease ended during its final evaluation
+    (unfinished / DONE_FILE).unlink()  # as if the machine had stopped during its final evaluation
     for c in cells:
         (c.directory(run) / ".lock").write_text("")
         (c.directory(run) / "checkpoint.prev").mkdir()

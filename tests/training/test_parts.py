@@ -191,7 +191,7 @@ def test_a_failed_prefetch_raises_in_the_training_thread():
             batches.next()
 
 
-def test_run_state_counts_wall_time_over_sittings(monkeypatch):
+def test_run_state_counts_wall_time_over_resumed_processes(monkeypatch):
     """A checkpoint carries the run's elapsed wall time; a resumed run goes on counting from it."""
     from d5rl.training import parts
 
@@ -205,5 +205,5 @@ def test_run_state_counts_wall_time_over_sittings(monkeypatch):
     resumed = parts.RunState.from_json(saved)
     clock[0] += 15.0
     assert resumed.elapsed() == 75.0
-    del saved["elapsed_s"]  # a checkpoint written before runs counted sittings
+    del saved["elapsed_s"]  # a checkpoint written before runs added up the time of earlier processes
     assert parts.RunState.from_json(saved).elapsed() == 0.0

@@ -15,13 +15,13 @@ def assert_offline_resume_is_exact(tmp_path, algo, task, steps, kw, ds, interrup
     full = train(algo, task, steps, 0, 1, kw, tmp_path / "a", dataset=ds)
     with pytest.raises(KeyboardInterrupt), interrupt_after_checkpoint(interrupt_at):
         train(algo, task, steps, 0, 1, kw, tmp_path / "b", dataset=ds)
-    first_sitting = json.loads((tmp_path / "b" / "checkpoint" / "state.json").read_text())["elapsed_s"]
+    first_process = json.loads((tmp_path / "b" / "checkpoint" / "state.json").read_text())["elapsed_s"]
     resumed = train(algo, task, steps, 0, 1, kw, tmp_path / "b", dataset=ds)
     for a, b in zip(leaves(full["agent"]), leaves(resumed["agent"])):
         np.testing.assert_array_equal(a, b)
     assert rows(tmp_path / "a") == rows(tmp_path / "b")
     assert (full["resumed"], resumed["resumed"]) == (False, True)
-    assert first_sitting > 0 and resumed["run_wall_s"] >= first_sitting  # both sittings count
+    assert first_process > 0 and resumed["run_wall_s"] >= first_process  # both processes count
 
 
 def test_offline_resume_is_exact(tmp_path):
@@ -94,7 +94,7 @@ def test_a_killed_evaluation_resumes_at_its_first_unfinished_episode(tmp_path):
     assert resumed == unbroken and not path.exists()
 
 
-def test_an_evaluation_keeps_the_time_its_finished_episodes_took_over_sittings(tmp_path, monkeypatch):
+def test_an_evaluation_keeps_the_time_its_finished_episodes_took_before_a_resume(tmp_path, monkeypatch):
     from d5rl.training import evaluation
 
     clock = [1000.0]
@@ -153,7 +153,7 @@ def test_a_run_killed_in_its_final_evaluation_resumes_it(tmp_path, monkeypatch, 
     assert len(json.loads((tmp_path / "b" / "eval_progress.json").read_text())["episodes"]) == 2
     monkeypatch.setattr(EvalProgress, "save", real_save)
     progress = json.loads((tmp_path / "b" / "eval_progress.json").read_text())
-    assert progress["wall_s"] > 0  # the first sitting's time on the two finished episodes
+    assert progress["wall_s"] > 0  # the first process's time on the two finished episodes
     progress["wall_s"] = 5000.0  # as if they had taken 5,000 s: the resumed run must count them
     (tmp_path / "b" / "eval_progress.json").write_text(json.dumps(progress))
     capsys.readouterr()

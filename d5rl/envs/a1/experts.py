@@ -29,13 +29,13 @@ there as a time-out) and a checkpoint is written to ``--work-dir`` (learners, re
 logs, RNG states; :mod:`d5rl.training.checkpoint`).  Running the same command again continues
 from it; ``--max-minutes`` stops at the first boundary after the budget.
 
-**Across machines** (training takes longer than one sitting of a 2-core machine): ``export``
+**Across machines** (training can outlast a machine you hold for a few hours): ``export``
 writes the checkpoints without their replay buffers to ``experiments/a1-agents`` for committing,
 and ``train`` resumes from there when ``--work-dir`` has none (:mod:`d5rl.envs.a1.resume`).
 
 **Training reward.** The tasks' rewards are flat within ±0.1 m/s of the target, and their energy
-term then pulls an agent to the slow edge (our first agents settled at 0.48 / 0.71 / 0.70 m/s for
-targets 0.5 / 0.8 / 1.0).  Data agents therefore train on the same reward with the flat band
+term then pulls an agent to the slow edge (agents trained on the task reward settle at 0.48 / 0.71 /
+0.70 m/s for targets 0.5 / 0.8 / 1.0).  Data agents therefore train on the same reward with the flat band
 narrowed to ``[target, target + 0.03]`` (:attr:`AgentSpec.band`), so that each tracks its
 target; datasets store the reward terms and relabel every step for the task at load time.
 """
@@ -109,7 +109,7 @@ class Trainer:
         self.work_dir, self.policy_dir, self.init_from = Path(work_dir), Path(policy_dir), init_from
         self.saved_root = None if saved_root is None else Path(saved_root)  # exported checkpoints (no buffers)
         self.config = learner_config(utd)
-        self.prior_seconds = 0.0  # training time of earlier sittings (set by a resume)
+        self.prior_seconds = 0.0  # training time of earlier processes (set by a resume)
         self.envs = [make_env(a) for a in agents]
         self.obs_dim = dims.pop()
         self.k = len(agents)
@@ -205,7 +205,7 @@ class Trainer:
             print(f"[{'+'.join(self.names)}] {ckpt.path} has no replay buffer: refilling {t} steps per agent "
                   "by replaying the snapshots", flush=True)
             refill_buffer(self.buf, t, segments, self.names, self.envs, self.policy_dir, self.seed)
-        # training time of the earlier sittings (checkpoints from before it was stored: the agents' logs)
+        # training time of the earlier processes (checkpoints from before it was stored: the agents' logs)
         logs = [self.policy_dir / n / "log.json" for n in self.names]
         earlier = [json.loads(f.read_text()).get("train_seconds", 0) for f in logs if f.exists()]
         self.prior_seconds = s.get("train_seconds", max(earlier, default=0))
@@ -330,7 +330,7 @@ class Trainer:
                 name = f"snapshot-{len(segments[i]):02d}.npz"
                 self._snapshot(learners, i, name)
                 segments[i].append(Segment(name, t))
-        seconds = self.prior_seconds + time.time() - t0  # over every sitting
+        seconds = self.prior_seconds + time.time() - t0  # over every process that trained them
         self._write_logs(segments, t, seconds)
         self._save(learners, t, rng, key, segments, seconds)
         if final:

@@ -25,7 +25,7 @@ def test_exported_checkpoint_resumes_on_a_machine_without_the_buffer(tmp_path):
     assert saved.buffer is None and saved.agent == full.agent and saved.state == full.state
     assert not (tmp_path / "saved" / "checkpoints" / "speed-0.5+run-1.25" / "checkpoint.prev").exists()
 
-    # training time adds up over sittings: pretend the first sitting took 1000 s
+    # training time adds up over resumed processes: pretend the first one took 1000 s
     from d5rl.training.checkpoint import Checkpoint, save_checkpoint
 
     save_checkpoint(tmp_path / "saved" / "checkpoints" / "speed-0.5+run-1.25",

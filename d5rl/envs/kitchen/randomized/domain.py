@@ -37,17 +37,17 @@ from d5rl.envs.kitchen.randomized.objects import NUM_KETTLES, NUM_MICROWAVES
 
 MAX_EXTRA_LIGHTS = 3
 # Kettle start sites: (dx, dy) m of the kettle from its stock pose (on the bottom-left burner).
-# bottom left and top right (burner centres: 0.446 m apart in x, 0.44 in y).  The bottom-right burner
-# was tried: right in front of the robot's base, the arm reached it only with its base joint near
-# its limit and could not carry the kettle over to the left (0 of 24 at the range's corners).  The
-# front of the top-right burner (4 cm closer) was tried too: 3.63 objects per demo episode against
-# 3.66 at its centre (the same 32 episodes).
+# bottom left and top right (burner centres: 0.446 m apart in x, 0.44 in y).  Not the bottom-right
+# burner: right in front of the robot's base, the arm reaches it only with its base joint near its
+# limit and cannot carry the kettle over to the left (0 of 24 at the range's corners).  The centre of
+# the top-right burner rather than its front (4 cm closer): 3.66 objects per demo episode against 3.63
+# (the same 32 episodes).
 KETTLE_SITES = ((0.0, 0.0), (0.446, 0.44))
 # m, uniform kettle start-position noise at its site in x and y (+y: away from the robot).  Closer to the
 # robot than 1 cm the stock kettle's scripted grasp starts with the shoulder at its limit.
 KETTLE_X = (-0.03, 0.03)
 KETTLE_Y = (-0.01, 0.03)
-KETTLE_YAW = float(np.deg2rad(20.0))  # rad, uniform kettle yaw about its vertical axis (+-; was 15 deg)
+KETTLE_YAW = float(np.deg2rad(20.0))  # rad, uniform kettle yaw about its vertical axis (+-)
 MICROWAVE_X = (-0.05, 0.03)  # m, uniform microwave offset along the counter (its frame's x; - is further left)
 MICROWAVE_Y = (-0.03, 0.04)  # m, towards / away from the wall
 MICROWAVE_YAW = (0.0, float(np.deg2rad(10.0)))  # rad, uniform microwave yaw range (towards the robot)

@@ -7,15 +7,15 @@ Kettles (8): a body shape (the stock kettle, a box, a wide cylinder, a tall cyli
 on a foot), each with a collision primitive and a mass of its own, and a handle bar across the top
 at the body's own height, thickness and length.  The operator grasps every handle from the front
 with the fingers closing on the bar from above and below (the lower finger carries the kettle), at
-the model's handle site, along a stretch and with a lift height that fit the model.  Grasps of
-another kind were tried and dropped: a vertical grip on the robot's side of the body held like a
-jug (the hanging kettle turned in the fingers: placed in 6 of 12 tries) and a bar running front
-to back with the fingers closing on its sides (friction alone does not hold the kettle: 0 of 8).
+the model's handle site, along a stretch and with a lift height that fit the model.  Other grasps
+fail the scripted operator: a vertical grip on the robot's side of the body held like a jug (the
+hanging kettle turns in the fingers: placed in 6 of 12 tries) and a bar running front to back with
+the fingers closing on its sides (friction alone does not hold the kettle: 0 of 8).
 
 Microwaves (4): the stock one and three others, each with a body shell that collides (the arm
 can hit it), its own door mass, and its own handle: a long thin vertical bar, a thick bar low on the
-door, a stubby bar; the operator grasps each at heights along the bar that fit it.  (A horizontal
-bar, grasped with the fingers closing vertically, was tried: opened in 1 of 4 tries, dropped.)
+door, a stubby bar; the operator grasps each at heights along the bar that fit it.  (No horizontal
+bars: grasped with the fingers closing vertically, one opens the door in 1 of 4 tries.)
 Handles are the door's visual *and* collision geometry; the site the operator aims at sits on
 the handle.  Subtask checks stay those of the standard kitchen.
 """
