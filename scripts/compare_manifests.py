@@ -3,7 +3,7 @@
     python scripts/compare_manifests.py MINE/manifest.json REFERENCE/manifest.json
 
 Prints how many arrays are byte-identical, which shards differ, and each side's package versions
-(README, "Determinism, and its limit").
+(docs/guarantees.md, "Determinism, and its limit").
 """
 
 from __future__ import annotations

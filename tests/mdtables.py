@@ -41,7 +41,7 @@ def report_entries(text: str) -> dict[tuple[str, str], str]:
     ``report.md``: the tables whose heading says "(ours / paper)")."""
     out = {}
     for start, header, rows in tables(text):
-        heading = text.rfind("\n###", 0, start)
-        if "(ours / paper)" in text[heading:start]:
+        heading = max(text.rfind("\n#", 0, start), 0)
+        if "(ours / paper)" in text[heading:start].split("\n#")[-1]:
             out.update(entries(header, rows))
     return out

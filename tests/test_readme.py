@@ -8,6 +8,7 @@ from pathlib import Path
 import pytest
 
 import d5rl
+from tests.mdtables import entries, report_entries, tables
 
 ROOT = Path(__file__).resolve().parents[1]
 README = (ROOT / "README.md").read_text()
@@ -45,66 +46,59 @@ def test_cli_commands_in_readme_exist():
 
 @pytest.mark.parametrize("index", range(len(code_blocks("python"))))
 def test_python_blocks_run(index, tmp_path):
-    code = code_blocks("python")[index]
+    run_python(code_blocks("python")[index], tmp_path)
+
+
+def run_python(code: str, tmp_path: Path) -> None:
     env_home = tmp_path / "home"
     proc = subprocess.run([sys.executable, "-c", code], cwd=tmp_path, capture_output=True, text=True, timeout=600,
                           env={**__import__("os").environ, "D5RL_HOME": str(env_home), "PYTHONPATH": str(ROOT)})
     assert proc.returncode == 0, proc.stderr[-3000:]
 
 
-# --- published results: the README's result tables are copies of the reports' -------------------------------
-def _tables(text: str) -> list[tuple[int, list[str], list[list[str]]]]:
-    """Every markdown table of ``text``: (offset of its header line, header cells, body rows)."""
-    out = []
-    for m in re.finditer(r"^(\|.*\|)\n\|[-:| ]+\|\n((?:\|.*\|\n?)*)", text, flags=re.M):
-        cells = lambda line: [c.strip() for c in line.strip().strip("|").split("|")]  # noqa: E731
-        out.append((m.start(), cells(m.group(1)), [cells(r) for r in m.group(2).splitlines() if r.strip()]))
-    return out
+# --- published results: the docs' result tables are copies of the reports' -----------------------------------
+PAGES = [ROOT / "README.md", *sorted((ROOT / "docs").glob("*.md"))]  # the front page and the docs pages
+GRIDS = ROOT / "docs" / "results"
+LINK = re.compile(r"\]\(([^)\s#]+)[^)]*\)")
 
 
-def _task_of(row: list[str]) -> str | None:
-    for cell in row[:2]:
-        m = re.search(r"[a-z0-9]+(?:-[a-z0-9]+)*-v\d+", cell)
-        if m:
-            return m.group(0)
-    return None
+def _grid_before(page: Path, text: str, start: int) -> str | None:
+    """The grid (``docs/results/<grid>/``) of the last link above ``start`` that leads into one."""
+    grid = None
+    for target in LINK.findall(text[:start]):
+        path = (page.parent / target).resolve()
+        if path.is_relative_to(GRIDS) and path != GRIDS:
+            grid = path.relative_to(GRIDS).parts[0]
+    return grid
 
 
-def _entries(header, rows) -> dict[tuple[str, str], str]:
-    """(task, method label) -> the table's entry, for the columns named after a method."""
+def test_result_tables_match_their_reports():
+    """Each table of scores on the front page and the docs pages is the entries of the grid report it follows
+    (the last ``docs/results/<grid>/`` linked above it), number for number: a hand-copied table cannot drift
+    from ``d5rl report``'s output.  An entry may add a remark after the number (``(n=1)``).  Every published
+    grid has a table checked this way, and the front page carries the headline one."""
     from d5rl.runner.report import METHODS
 
-    labels = set(METHODS.values())
-    out = {}
-    for row in rows:
-        task = _task_of(row)
-        if task:
-            out.update({(task, col): cell for col, cell in zip(header, row) if col in labels})
-    return out
-
-
-def test_readme_result_tables_match_their_reports():
-    """Each README table of scores is the entries of the grid report it follows (the last
-    ``docs/results/<grid>/`` named above it), number for number: a hand-copied table cannot drift from
-    ``d5rl report``'s output.  A README entry may add a remark after the number (``(n=1)``)."""
-    from d5rl.runner.report import METHODS
-
-    checked = 0
-    for start, header, rows in _tables(README):
-        if not set(header) & set(METHODS.values()):
-            continue
-        grids = re.findall(r"docs/results/([\w-]+)/", README[:start])
-        assert grids, f"the README's table with columns {header} follows no docs/results/<grid>/ link"
-        report = ROOT / "docs/results" / grids[-1]
-        ours = {}
-        for path in sorted(report.glob("*_vs_paper.md")):
-            for _, h, r in _tables(path.read_text()):
-                ours.update(_entries(h, r))
-        mine = _entries(header, rows)
-        assert mine, f"no (task, method) entries read from the README's table {header}"
-        for key, cell in mine.items():
-            assert key in ours, f"README ({grids[-1]}): {key} is not in {report}/*_vs_paper.md"
-            assert cell == ours[key] or cell.startswith(ours[key] + " "), \
-                f"README ({grids[-1]}) {key}: {cell!r}, its report says {ours[key]!r}"
-            checked += 1
-    assert checked >= 50, f"only {checked} README entries were checked against reports"
+    checked: dict[str, int] = {}
+    for page in PAGES:
+        text = page.read_text()
+        for start, header, rows in tables(text):
+            if not set(header) & set(METHODS.values()):
+                continue
+            name = page.relative_to(ROOT)
+            grid = _grid_before(page, text, start)
+            assert grid, f"{name}: the table with columns {header} follows no link into docs/results/<grid>/"
+            ours = {}
+            for path in sorted((GRIDS / grid).glob("*_vs_paper.md")):
+                ours.update(report_entries(path.read_text()))
+            mine = entries(header, rows)
+            assert mine, f"{name}: no (task, method) entries read from the table {header}"
+            for key, cell in mine.items():
+                assert key in ours, f"{name} ({grid}): {key} is not in docs/results/{grid}/*_vs_paper.md"
+                assert cell == ours[key] or cell.startswith(ours[key] + " "), \
+                    f"{name} ({grid}) {key}: {cell!r}, its report says {ours[key]!r}"
+                checked[str(name)] = checked.get(str(name), 0) + 1
+                checked[grid] = checked.get(grid, 0) + 1
+    assert checked.get("README.md", 0) >= 50, f"only {checked.get('README.md', 0)} front-page entries were checked"
+    published = {p.parent.name for p in GRIDS.glob("*/cells")}
+    assert published and all(checked.get(g) for g in published), f"grids without a checked table: {published - set(checked)}"
