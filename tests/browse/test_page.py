@@ -9,6 +9,7 @@ Set ``D5RL_SCREENSHOTS=DIR`` to save screenshots of the views (the README's come
 
 from __future__ import annotations
 
+import contextlib
 import json
 import os
 import shutil
@@ -122,6 +123,25 @@ def test_click_into_an_episode_and_scrub(tmp_path):
 RUNS_SECTION = 'section.task-runs[data-task="a1-walk-v0"]'  # what docs/img/browse-runs.png shows
 
 
+@contextlib.contextmanager
+def runs_page(tmp_path, run_dirs):
+    """The Runs view over ``run_dirs`` in headless Chromium; fails the test if the page raised an error."""
+    from playwright.sync_api import sync_playwright
+
+    errors = []
+    with Server(run_dirs) as server, sync_playwright() as p:
+        ctx = browser(p, tmp_path)
+        try:
+            page = ctx.new_page()
+            page.set_default_timeout(20_000)
+            page.on("pageerror", lambda e: errors.append(str(e)))
+            page.goto(server.url + "/#/runs")
+            yield page
+        finally:
+            ctx.close()
+    assert not errors, errors
+
+
 def _grid(root: Path, cells) -> Path:
     """A grid of a1-walk-v0 cells: ``cells`` is ``[(algo, seed, [score of each evaluation])]``, evaluated
     every 50 of 100 steps from the end back."""
@@ -143,8 +163,6 @@ def test_runs_view_compares_agents_with_the_paper_as_the_reports_do(tmp_path):
     """Two grids whose folders are both ``cells``: one table per task with every agent of both, named apart,
     each entry as the grid's report.md writes it next to the paper's, sortable, the best mean highlighted;
     learning curves for the agent evaluated twice, final scores per seed for the others."""
-    from playwright.sync_api import sync_playwright
-
     from d5rl.runner.report import seed_interval, write_report
     from tests.mdtables import report_entries
 
@@ -152,74 +170,52 @@ def test_runs_view_compares_agents_with_the_paper_as_the_reports_do(tmp_path):
                                                       ("iql", 0, [0.2, 0.8]), ("iql", 1, [0.4, 0.9])]),
              "g2/cells": _grid(tmp_path / "g2/cells", [("bc", 0, [0.1]), ("bc", 1, [0.2]), ("bc", 2, [0.3])])}
     reports = {k: report_entries(write_report(g, plots=False).read_text()) for k, g in grids.items()}
-    errors = []
-    with Server(list(grids.values())) as server, sync_playwright() as p:
-        ctx = browser(p, tmp_path)
-        try:
-            page = ctx.new_page()
-            page.set_default_timeout(20_000)
-            page.on("pageerror", lambda e: errors.append(str(e)))
-            page.goto(server.url + "/#/runs")
-            section = page.locator(RUNS_SECTION)
-            section.locator(".dots .main-svg").first.wait_for()
-            table = section.locator('table.compare[data-phase="offline"]')
-            head = table.locator("th").all_inner_texts()
-            assert [h.rstrip(" ▲▼") for h in head] == ["agent", "steps", "seeds", "mean ± std", "95% CI of the mean",
-                                                      "paper (a1-walk-v0)"]
-            rows = [r.locator("td").all_inner_texts() for r in table.locator("tr[data-algo]").all()]
-            assert [r[0] for r in rows] == ["g1/cells: IQL", "g1/cells: BC", "g2/cells: BC"]  # best mean first
-            for label, _, _, ours, _, paper in rows:
-                grid, method = label.split(": ")
-                assert f"{ours} / {paper}" == reports[grid][("a1-walk-v0", method)]  # as report.md writes it
-                assert paper == {"IQL": "0.962 ± 0.007", "BC": "1.006 ± 0.015"}[method]
-            assert rows[1][2:5] == ["2", "0.600 ± 0.100", "[0.500, 0.700]"]
-            assert seed_interval([0.5, 0.7]) == (0.5, 0.7)  # every resample's mean is 0.5, 0.6 or 0.7
-            assert table.locator("tr.best").all_inner_texts() == [table.locator("tr[data-algo]").first.inner_text()]
-            assert "g1/cells: IQL" in table.locator("tr.best").inner_text()
+    with runs_page(tmp_path, list(grids.values())) as page:
+        section = page.locator(RUNS_SECTION)
+        section.locator(".dots .main-svg").first.wait_for()
+        table = section.locator('table.compare[data-phase="offline"]')
+        head = table.locator("th").all_inner_texts()
+        assert [h.rstrip(" ▲▼") for h in head] == ["agent", "steps", "seeds", "mean ± std", "95% CI of the mean",
+                                                  "paper (a1-walk-v0)"]
+        rows = [r.locator("td").all_inner_texts() for r in table.locator("tr[data-algo]").all()]
+        assert [r[0] for r in rows] == ["g1/cells: IQL", "g1/cells: BC", "g2/cells: BC"]  # best mean first
+        for label, _, _, ours, _, paper in rows:
+            grid, method = label.split(": ")
+            assert f"{ours} / {paper}" == reports[grid][("a1-walk-v0", method)]  # as report.md writes it
+            assert paper == {"IQL": "0.962 ± 0.007", "BC": "1.006 ± 0.015"}[method]
+        assert rows[1][2:5] == ["2", "0.600 ± 0.100", "[0.500, 0.700]"]
+        assert seed_interval([0.5, 0.7]) == (0.5, 0.7)  # every resample's mean is 0.5, 0.6 or 0.7
+        assert table.locator("tr.best").all_inner_texts() == [table.locator("tr[data-algo]").first.inner_text()]
+        assert "g1/cells: IQL" in table.locator("tr.best").inner_text()
 
-            table.locator('th[data-col="mean ± std"]').click()  # ascending
-            assert [r.split("\t")[0] for r in table.locator("tr[data-algo]").all_inner_texts()] == \
-                ["g2/cells: BC", "g1/cells: BC", "g1/cells: IQL"]
-            table.locator('th[data-col="agent"]').click()
-            assert [r.split("\t")[0] for r in table.locator("tr[data-algo]").all_inner_texts()] == \
-                ["g1/cells: BC", "g1/cells: IQL", "g2/cells: BC"]
+        table.locator('th[data-col="mean ± std"]').click()  # ascending
+        assert [r.split("\t")[0] for r in table.locator("tr[data-algo]").all_inner_texts()] == \
+            ["g2/cells: BC", "g1/cells: BC", "g1/cells: IQL"]
+        table.locator('th[data-col="agent"]').click()
+        assert [r.split("\t")[0] for r in table.locator("tr[data-algo]").all_inner_texts()] == \
+            ["g1/cells: BC", "g1/cells: IQL", "g2/cells: BC"]
 
-            curves = section.locator(".plot.curve")
-            assert curves.evaluate("d => d.data.filter(t => t.name).map(t => [t.name, t.x])") == \
-                [["g1/cells: IQL (2 seeds)", [50, 100]]]
-            dots = section.locator(".plot.dots")
-            assert dots.evaluate("d => d.data.map(t => [t.name, t.y, t.x])") == [
-                ["g1/cells: BC", ["g1/cells: BC"] * 2, [0.5, 0.7]],
-                ["g2/cells: BC", ["g2/cells: BC"] * 3, [0.1, 0.2, 0.3]],
-                ["paper's mean", ["g1/cells: BC", "g2/cells: BC"], [1.006, 1.006]]]
-            # Plotly's tool bar shows at the top right on hover: it must not cover a plot's title
-            for plot in (curves, dots):
-                plot.hover()
-                bar = plot.locator(".modebar").bounding_box()
-                title = plot.locator("xpath=preceding-sibling::div[contains(@class, 'plot-title')]").bounding_box()
-                assert bar and title and bar["y"] >= title["y"] + title["height"]
-            shot(page, "runs")
-        finally:
-            ctx.close()
-    assert not errors, errors
+        curves = section.locator(".plot.curve")
+        assert curves.evaluate("d => d.data.filter(t => t.name).map(t => [t.name, t.x])") == \
+            [["g1/cells: IQL (2 seeds)", [50, 100]]]
+        dots = section.locator(".plot.dots")
+        assert dots.evaluate("d => d.data.map(t => [t.name, t.y, t.x])") == [
+            ["g1/cells: BC", ["g1/cells: BC"] * 2, [0.5, 0.7]],
+            ["g2/cells: BC", ["g2/cells: BC"] * 3, [0.1, 0.2, 0.3]],
+            ["paper's mean", ["g1/cells: BC", "g2/cells: BC"], [1.006, 1.006]]]
+        # Plotly's tool bar shows at the top right on hover: it must not cover a plot's title
+        for plot in (curves, dots):
+            plot.hover()
+            bar = plot.locator(".modebar").bounding_box()
+            title = plot.locator("xpath=preceding-sibling::div[contains(@class, 'plot-title')]").bounding_box()
+            assert bar and title and bar["y"] >= title["y"] + title["height"]
+        shot(page, "runs")
 
 
 def test_runs_view_shows_what_the_agents_do(tmp_path):
-    from playwright.sync_api import sync_playwright
-
     from tests.browse.test_server import _run_dir
 
-    errors = []
-    with Server([_run_dir(tmp_path / "run")]) as server, sync_playwright() as p:
-        ctx = browser(p, tmp_path)
-        try:
-            page = ctx.new_page()
-            page.set_default_timeout(20_000)
-            page.on("pageerror", lambda e: errors.append(str(e)))
-            page.goto(server.url + "/#/runs")
-            page.wait_for_selector("text=What the agents do")
-            table = page.locator("table.scores").last.inner_text()
-            assert "reached" in table and "0.500" in table  # the mean of the two seeds' 0.25 and 0.75
-        finally:
-            ctx.close()
-    assert not errors, errors
+    with runs_page(tmp_path, [_run_dir(tmp_path / "run")]) as page:
+        page.wait_for_selector("text=What the agents do")
+        table = page.locator("table.scores").last.inner_text()
+        assert "reached" in table and "0.500" in table  # the mean of the two seeds' 0.25 and 0.75
