@@ -45,7 +45,8 @@ def links(path: Path) -> list[str]:
 
 def test_anchor_rules():
     assert "how-our-data-differs-from-the-papers" in anchors(ROOT / "docs/data-differences.md")
-    assert "table-2-offline-to-online-on-a1" in anchors(ROOT / "docs/results.md")  # "## Table 2, offline-to-online, on A1"
+    # "## Table 2, offline-to-online, on A1"
+    assert "table-2-offline-to-online-on-a1" in anchors(ROOT / "docs/results.md")
 
 
 @pytest.mark.parametrize("doc", DOCS, ids=lambda p: str(p.relative_to(ROOT)))
@@ -133,7 +134,7 @@ def command_problem(cmd: list[str]) -> str | None:
 def test_documented_commands_parse(doc):
     bad = [f"`{shlex.join(c)}`: {why}" for block in blocks(doc, "bash") for c in commands(block)
            if (why := command_problem(c))]
-    spans = re.findall(r"`((?:d5rl|python|bash) [^`\n]+)`", re.sub(r"^```.*?^```", "", doc.read_text(), flags=re.S | re.M))
+    spans = re.findall(r"`((?:d5rl|python|bash) [^`\n]+)`", prose(doc))
     for span in spans:  # inline commands often hold placeholders (TASK, RUN_DIR): the command and file must exist
         words = span.split()
         if words[0] == "d5rl":
@@ -148,8 +149,9 @@ def test_documented_commands_parse(doc):
 
 
 def test_command_checks_can_fail():
-    assert commands('S="--seeds 0-2"\nd5rl bench --tasks a1 \\\n  $S  # c\nX=1 bash scripts/test.sh && d5rl list &') == \
-        [["d5rl", "bench", "--tasks", "a1", "--seeds", "0-2"], ["bash", "scripts/test.sh"], ["d5rl", "list"]]
+    block = 'S="--seeds 0-2"\nd5rl bench --tasks a1 \\\n  $S  # c\nX=1 bash scripts/test.sh && d5rl list &'
+    assert commands(block) == [["d5rl", "bench", "--tasks", "a1", "--seeds", "0-2"], ["bash", "scripts/test.sh"],
+                               ["d5rl", "list"]]
     assert command_problem(["d5rl", "train", "a1-walk-v0", "--algo", "iql"])  # not how train is called
     assert command_problem(["d5rl", "bench", "--no-such-flag"])
     assert command_problem(["python", "bench/no_such_script.py"]) == "no file bench/no_such_script.py"

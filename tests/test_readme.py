@@ -101,4 +101,4 @@ def test_result_tables_match_their_reports():
                 checked[grid] = checked.get(grid, 0) + 1
     assert checked.get("README.md", 0) >= 50, f"only {checked.get('README.md', 0)} front-page entries were checked"
     published = {p.parent.name for p in GRIDS.glob("*/cells")}
-    assert published and all(checked.get(g) for g in published), f"grids without a checked table: {published - set(checked)}"
+    assert published and all(checked.get(g) for g in published), f"grids without a table: {published - set(checked)}"

@@ -122,7 +122,7 @@ def record_failure(cell_dir: Path, attempt: int, error: str, tb: str, wall_s: fl
 
 
 def attempt_header(key: str) -> str:
-    """How the line starts that each process working on a cell writes to its log (one per process, so a resumed cell has several)."""
+    """How the line starts that each process working on a cell writes to its log (a resumed cell has several)."""
     return f"=== {key} attempt "
 
 

@@ -116,7 +116,8 @@ def test_wall_time_counts_every_process(tmp_path):
         cdir = cell.directory(tmp_path)
         write_cell_file(cell, cdir)
         (cdir / "metrics.jsonl").write_text(json.dumps({"step": 100, "eval/a1-walk-v0/score": 0.5}) + "\n")
-        (cdir / "log.txt").write_text("".join(f"=== {cell.key} attempt 1 on vm pid {i} at now\n" for i in range(processes)))
+        headers = [f"=== {cell.key} attempt 1 on vm pid {i} at now\n" for i in range(processes)]
+        (cdir / "log.txt").write_text("".join(headers))
         (cdir / "done").write_text(json.dumps({"wall_s": 300.0, "summary": summary}))
     walls = sorted(c.wall_s for c in collect(tmp_path))
     assert walls == [300.0, 600.0]  # the run's total where known, not the last process's 300 s
