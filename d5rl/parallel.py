@@ -13,6 +13,13 @@ job per shard through :func:`run_jobs`; the backend is chosen by ``workers``:
 Jobs report progress with :func:`report` (any picklable payload, e.g. one finished
 episode); the driver receives it through ``on_message`` whatever the backend.
 
+Scripts without ``if __name__ == "__main__":``: a ``spawn`` worker normally re-runs the main
+script to find what it was sent; a script calling d5rl at top level would then call it again in
+every worker, and wait on its own parent's dataset lock.  When nothing sent to the workers comes
+from the main script (d5rl's own jobs never do), the workers are started without it; otherwise a
+worker that re-runs it and reaches a d5rl lock its parent holds stops with a one-line error naming
+the guard (:func:`d5rl.datasets.lock.writing`).
+
 Stopping: on Ctrl-C or an error the driver terminates its pool workers at once (they ignore
 SIGINT, so a Ctrl-C to the whole process group is handled by the driver alone), and a worker
 whose driver dies, even by ``kill -9``, exits by itself (``PR_SET_PDEATHSIG`` on Linux and a
@@ -32,6 +39,7 @@ import sys
 import threading
 import time
 import traceback
+import types
 import uuid
 from dataclasses import dataclass
 from pathlib import Path
@@ -232,6 +240,29 @@ def _drain(q, on_message, get) -> None:
             on_message(msg)
 
 
+def needs_main(*payload) -> bool:
+    """Whether unpickling ``payload`` in another process needs this process's ``__main__`` module."""
+    try:
+        return b"__main__" in pickle.dumps(payload)
+    except Exception:  # noqa: BLE001 - not picklable: the pool says so when it sends it
+        return True
+
+
+@contextlib.contextmanager
+def _without_main_script(hide: bool):
+    """Start processes that do not re-run the main script (see the module docstring): ``spawn``
+    records which script to re-run from ``sys.modules["__main__"]`` when a process starts."""
+    main = sys.modules.get("__main__")
+    if not hide or main is None:
+        yield
+        return
+    sys.modules["__main__"] = types.ModuleType("__main__")
+    try:
+        yield
+    finally:
+        sys.modules["__main__"] = main
+
+
 def _run_pool(fn, jobs, n, initializer, initargs, on_message, settle) -> None:
     ctx = mp.get_context("spawn")  # fork is unsafe with JAX / OpenGL state in the parent
     tasks, results = ctx.SimpleQueue(), ctx.Queue()
@@ -241,8 +272,9 @@ def _run_pool(fn, jobs, n, initializer, initargs, on_message, settle) -> None:
         tasks.put(None)
     procs = [ctx.Process(target=_pool_worker, args=(tasks, results, fn, initializer, initargs, os.getpid()),
                          daemon=True, name=f"d5rl-worker-{k}") for k in range(n)]
-    for p in procs:
-        p.start()
+    with _without_main_script(not needs_main(fn, initializer, initargs, jobs)):
+        for p in procs:
+            p.start()
     remaining = set(range(len(jobs)))
     try:
         while remaining:
@@ -252,7 +284,8 @@ def _run_pool(fn, jobs, n, initializer, initargs, on_message, settle) -> None:
                 dead = [p for p in procs if p.exitcode not in (None, 0)]
                 if dead:
                     raise D5RLError(f"a worker process died (exit code {dead[0].exitcode}) before finishing its job",
-                                    "look for an out-of-memory kill (dmesg); run the same command again to resume")
+                                    "its error, if it had time to print one, is above; otherwise look for an "
+                                    "out-of-memory kill (dmesg); run the same command again to resume")
                 continue
             if kind == "msg":
                 if on_message is not None:

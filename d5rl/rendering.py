@@ -10,6 +10,7 @@ import os
 
 import d5rl.envs  # noqa: F401  (the MUJOCO_GL default, before mujoco is imported)
 import mujoco  # noqa: E402
+import numpy as np
 
 from d5rl.errors import RenderBackendError
 
@@ -28,3 +29,19 @@ def make_renderer(model: mujoco.MjModel, height: int, width: int) -> mujoco.Rend
     except Exception as e:  # mujoco raises plain Exceptions / RuntimeErrors / AttributeErrors for GL
         backend = os.environ.get("MUJOCO_GL", "(unset)")
         raise RenderBackendError(f"cannot create an offscreen renderer with MUJOCO_GL={backend}: {e}", _HINT) from e
+
+
+def sync_materials(renderer: mujoco.Renderer, model: mujoco.MjModel) -> None:
+    """Copy ``model``'s material-to-texture assignment into ``renderer``'s GL context.
+
+    ``mjr_makeContext`` copies ``mat_texid`` / ``mat_texrepeat`` / ``mat_texuniform`` into the context
+    when the renderer is made and renders from that copy afterwards (MuJoCo has no upload call for
+    them, unlike ``mjr_uploadTexture`` for texture pixels), so a model whose materials change textures
+    after its renderer exists must be synced, or a reused renderer draws the old assignment.
+    """
+    ctx = renderer._mjr_context
+    if ctx is None:  # closed
+        return
+    for name in ("mat_texid", "mat_texrepeat", "mat_texuniform"):
+        src = np.asarray(getattr(model, name)).ravel()
+        getattr(ctx, name)[: src.size] = src

@@ -64,6 +64,8 @@ def _flock(root: Path, name: str, exclusive: bool, waiting: str | None = None) -
         try:
             fcntl.flock(fd, mode | fcntl.LOCK_NB)
         except BlockingIOError:
+            if name == WRITE_LOCK:
+                _refuse_waiting_on_parent(root)
             if waiting:
                 print(waiting, file=sys.stderr, flush=True)
             fcntl.flock(fd, mode)  # interruptible by Ctrl-C
@@ -79,6 +81,25 @@ def _flock(root: Path, name: str, exclusive: bool, waiting: str | None = None) -
                 del _held[key]
     finally:
         os.close(fd)  # releases the lock
+
+
+def _refuse_waiting_on_parent(root: Path) -> None:
+    """A worker process re-running its parent's main script (spawn does, for a script without
+    ``if __name__ == "__main__":``) would wait forever for the lock its parent holds while it waits
+    for this worker: stop it with the fix instead."""
+    import multiprocessing as mp
+
+    with contextlib.suppress(OSError, ValueError, IndexError):
+        holder = int((root / WRITE_LOCK).read_text().split()[0])
+        if holder == os.getppid() and getattr(mp.current_process(), "_inheriting", False):
+            from d5rl.errors import D5RLError
+
+            err = D5RLError("a d5rl worker process re-ran the main script, which calls d5rl at top level",
+                            'put the script\'s code under `if __name__ == "__main__":` (worker processes import '
+                            "the main script), or pass workers=1")
+            # One line, not a traceback of the main script's import; the parent reports the exit.
+            print(f"d5rl: error: {err}", file=sys.stderr, flush=True)
+            raise SystemExit(1)
 
 
 def writing(root: str | Path, what: str = "generation") -> contextlib.AbstractContextManager:

@@ -209,3 +209,37 @@ def test_tuple_generator_kwargs_survive_the_json_round_trip():
     spec = register_toy("tuplekw", num_episodes=4, per_shard=4, extra=("a", "b"))
     generate(spec, progress=False)
     assert load_dataset(spec, generate=False).num_episodes == 4  # tuple vs list must not look stale
+
+
+def _run_script(tmp_path, text: str, timeout: float = 90):
+    script = tmp_path / "script.py"
+    script.write_text(text)
+    env = {**os.environ, "D5RL_HOME": str(tmp_path / "home"), "PYTHONPATH": str(REPO)}
+    return subprocess.run([sys.executable, str(script)], env=env, cwd=tmp_path, capture_output=True, text=True,
+                          timeout=timeout)
+
+
+def test_a_script_without_the_main_guard_generates_several_shards_in_a_pool(tmp_path):
+    # spawn workers re-run the main script unless told otherwise: here that would call load_dataset
+    # again in each worker, which waits for the parent's write lock while the parent waits for it.
+    proc = _run_script(tmp_path, "import d5rl\n"
+                       "ds = d5rl.load_dataset('toy-reach-v0', episodes=120, workers=2, progress=False)\n"
+                       "print('episodes', ds.num_episodes)\n")
+    assert proc.returncode == 0, proc.stderr
+    assert "episodes 120" in proc.stdout
+    assert len(list((tmp_path / "home/datasets/toy-reach").glob("v*/shards/shard-*"))) == 3
+
+
+def test_a_script_without_the_guard_whose_jobs_need_it_stops_with_the_guard_named(tmp_path):
+    # A generator defined in the script itself: the workers must re-run the script to find it.
+    proc = _run_script(tmp_path, "import d5rl\n"
+                       "from tests.datasets.toy import ToyGenerator, register_toy\n"
+                       "class ScriptGenerator(ToyGenerator):\n    pass\n"
+                       "import dataclasses\n"
+                       "spec = register_toy('noguard', num_episodes=12, per_shard=4)\n"
+                       "spec = dataclasses.replace(spec, dataset=dataclasses.replace(\n"
+                       "    spec.dataset, generator='__main__:ScriptGenerator'))\n"
+                       "d5rl.load_dataset(spec, workers=2, progress=False)\n")
+    assert proc.returncode != 0
+    assert 'if __name__ == "__main__":' in proc.stderr
+    assert "Traceback" not in proc.stderr.split("d5rl: error:")[0]

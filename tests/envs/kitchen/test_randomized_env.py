@@ -155,3 +155,41 @@ def test_lights_are_switched_not_compiled_and_state_envs_keep_one_model():
         lights = [env.model.light_active[env.model.light(f"rand_light{j}").id] for j in range(MAX_EXTRA_LIGHTS)]
         assert lights == [j < d.num_lights for j in range(MAX_EXTRA_LIGHTS)]
     assert env._variants == {}  # an environment that never rendered holds only its current model
+
+
+def _episode(seed: int, size: int = 32):
+    env = RandomizedKitchenEnv(image_size=size)
+    obs, info = env.reset(seed=seed)
+    return obs, info["domain"], env.get_state()
+
+
+def test_same_seed_same_pixels_in_a_reused_env_and_a_fresh_one():
+    # Seeds 0 and 7 draw the same (microwave, kettle) variant with different surface textures, so the
+    # second reset reuses the first one's renderers, whose GL context copied the material textures.
+    reused = RandomizedKitchenEnv(image_size=32)
+    _, first = reused.reset(seed=0)
+    obs, info = reused.reset(seed=7)
+    d0, d7 = Domain.from_json(first["domain"]), Domain.from_json(info["domain"])
+    assert d0.key == d7.key and d0.textures != d7.textures
+    fresh, fresh_domain, _ = _episode(7)
+    assert fresh_domain == info["domain"]
+    for c in ("left", "right", "wrist"):
+        np.testing.assert_array_equal(obs[f"pixels/{c}"], fresh[f"pixels/{c}"])
+
+
+def test_render_cache_frames_do_not_depend_on_the_episode_order(monkeypatch):
+    """A render-cache worker keeps one env per process: the frames of an episode must not depend on the
+    episodes it rendered before."""
+    from d5rl.envs.kitchen.randomized import data as rd
+
+    episodes = {s: _episode(s)[1:] for s in (0, 7)}
+
+    def render(order):
+        monkeypatch.setattr(rd, "_RENDER_ENV", {})
+        return {s: rd.render_episode({"states": episodes[s][1][None]}, {"domain": episodes[s][0]}, size=32)
+                for s in order}
+
+    a, b = render((0, 7)), render((7, 0))
+    for s in (0, 7):
+        for key in a[s]:
+            assert a[s][key].tobytes() == b[s][key].tobytes(), (s, key)

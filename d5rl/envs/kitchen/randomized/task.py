@@ -47,6 +47,7 @@ from d5rl.envs.kitchen.randomized.domain import (QUALITIES, Domain, apply_domain
                                                  kettle_start_offset)
 from d5rl.envs.kitchen.subtasks import MIXED
 from d5rl.envs.kitchen.task import KitchenEnv
+from d5rl.rendering import sync_materials
 
 CAMERAS = ("left", "right", "wrist")
 
@@ -91,6 +92,8 @@ class RandomizedKitchenEnv(KitchenEnv):
                 self.data = mujoco.MjData(self.model)
                 self._renderers = {}
         apply_domain(self.model, domain, self.quality)
+        for r in self._renderers.values():  # a reused renderer still holds the last domain's textures
+            sync_materials(r, self.model)
         self.domain = domain
         self.grasp_plans = grasp_plans(domain)
 
