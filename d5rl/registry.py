@@ -65,6 +65,9 @@ class DatasetSpec:
     # "module:function" called by the loader on a finished dataset to build caches
     # derived from it (e.g. camera frames rendered from stored states); see loading.py.
     derived: str | None = None
+    # Why the dataset cannot be made yet, in one line that names the command that fixes it (e.g. its
+    # data agents are not trained); generating or loading it raises this before any work.
+    unavailable: str | None = None
 
 
 @dataclasses.dataclass(frozen=True)

@@ -40,6 +40,8 @@ def dataset_spec(task: str | TaskSpec) -> DatasetSpec:
     spec = get_spec(task)
     if spec.dataset is None:
         raise D5RLError(f"task {spec.id} has no offline dataset")
+    if spec.dataset.unavailable:
+        raise D5RLError(f"{spec.id}: {spec.dataset.unavailable}")
     return spec.dataset
 
 

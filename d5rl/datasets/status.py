@@ -15,6 +15,8 @@ def dataset_status(spec) -> tuple[str, dict | None]:
 
     if spec.dataset is None:
         return "-", None
+    if spec.dataset.unavailable:
+        return "unavailable (data agents not trained)", None
     root = generation.dataset_root(spec.dataset)
     path = root / fmt.MANIFEST
     if path.exists():

@@ -12,7 +12,8 @@ from d5rl.errors import D5RLError
 
 def resolve_tasks(names: list[str]) -> list[str]:
     """Task ids; a family or prefix (``a1``, ``kitchen-standard``) stands for all its registered tasks
-    except the ``-state`` twins of camera tasks (the benchmark's rows), a glob (``'kitchen-*-state-v0'``)
+    except the ``-state`` twins of camera tasks (the benchmark's rows) and tasks whose dataset cannot be
+    made yet (``DatasetSpec.unavailable``: an explicit id says why), a glob (``'kitchen-*-state-v0'``)
     for those it matches."""
     import fnmatch
 
@@ -33,7 +34,8 @@ def resolve_tasks(names: list[str]) -> list[str]:
                 out.append(get_spec(part).id)  # unknown ids raise with suggestions
             else:
                 matches = [t for t in list_tasks() if t.startswith(part + "-")
-                           and (not t.endswith("-state-v0") or "state" in part)]
+                           and (not t.endswith("-state-v0") or "state" in part)
+                           and not (get_spec(t).dataset and get_spec(t).dataset.unavailable)]
                 if not matches:
                     raise D5RLError(f"no registered task is or starts with {part!r}",
                                     "run `d5rl list` to see the task ids")

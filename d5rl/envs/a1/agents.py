@@ -25,10 +25,18 @@ class AgentSpec:
     role: str = "data"  # "data": its replay buffer is a dataset; "reference": defines a score reference only
     band: tuple[float, float] = (0.0, 0.03)  # full speed reward in [target + band[0], target + band[1]] m/s
     episode_steps: int = EPISODE_STEPS
+    env_version: int = 0  # 0: d5rl.envs.a1.task.A1Env; 1: d5rl.envs.a1.v1.A1EnvV1 (the release's tasks)
+    task: str = ""  # v1 only: A1EnvV1 task (run | run_toward | hiking)
+    floors: str = "mixed"  # v1 run_toward only: "mixed" (smooth or bumpy per episode) or "smooth"
+
+    @property
+    def directed(self) -> bool:
+        """Whether the agent follows a direction (heading, goals or waypoints) rather than running along +x."""
+        return self.command != "forward" or self.task in ("run_toward", "hiking")
 
     @property
     def obs_dim(self) -> int:
-        return 58 if self.command == "forward" else 60
+        return 60 if self.directed else 58
 
 
 AGENTS = {
@@ -42,6 +50,18 @@ AGENTS = {
     # not 1.25: data card, "How fast can this A1 go?")
     "run-1.25": AgentSpec(1.25, role="reference"),
     "hiking": AgentSpec(0.75, "waypoints", "course", role="reference", band=(-0.1, 0.1), episode_steps=1000),
+    # the a1-*-v1 tasks (the release's action range, reward and hiking course): data agents ...
+    "speed-0.5-v1": AgentSpec(0.5, env_version=1, task="run"),
+    "speed-0.8-v1": AgentSpec(0.8, env_version=1, task="run"),
+    "speed-1.0-v1": AgentSpec(1.0, env_version=1, task="run"),
+    # hiking data candidates: the release's RunToward (goals within ±10 m) on its mixed floors, or on the
+    # plane only (the paper: the hiking data show "flat terrain")
+    "goals-mixed-v1": AgentSpec(1.0, env_version=1, task="run_toward", floors="mixed"),
+    "goals-smooth-v1": AgentSpec(1.0, env_version=1, task="run_toward", floors="smooth"),
+    # ... and score references
+    "run-1.25-v1": AgentSpec(1.25, role="reference", env_version=1, task="run"),
+    "hiking-v1": AgentSpec(1.0, role="reference", band=(-0.1, 0.1), episode_steps=1000, env_version=1,
+                           task="hiking"),
 }
 
 
@@ -51,8 +71,9 @@ def describe(agent: str, policy_dir: Path = POLICY_DIR) -> str:
 
     spec = AGENTS[agent]
     steps = agent_log(agent, str(policy_dir))["steps"]
-    where = "on the hiking course past its waypoints" if spec.terrain == "course" else (
-        "on flat ground, following a turning heading command" if spec.command == "heading" else "on flat ground")
+    where = "on the hiking course past its waypoints" if spec.terrain == "course" or spec.task == "hiking" else (
+        "on flat ground, following a turning heading command" if spec.command == "heading" else
+        f"toward random goals ({spec.floors} floors)" if spec.task == "run_toward" else "on flat ground")
     return f"SAC, {steps:,} steps, tracking {spec.target_speed} m/s {where}"
 
 
@@ -60,6 +81,11 @@ def make_env(agent: str):
     from d5rl.envs.a1.task import A1Env
 
     spec = AGENTS[agent]
+    if spec.env_version == 1:
+        from d5rl.envs.a1.v1 import A1EnvV1
+
+        extra = {"floors": spec.floors} if spec.task == "run_toward" else {}
+        return A1EnvV1(task=spec.task, target_speed=spec.target_speed, **extra)
     return A1Env(target_speed=spec.target_speed, terrain=spec.terrain, command=spec.command)
 
 
@@ -67,7 +93,7 @@ def training_reward(spec: AgentSpec, info: dict) -> float:
     """The agent's training reward from the env's reward terms (the task reward with ``spec.band``)."""
     lo, hi = spec.target_speed + spec.band[0], spec.target_speed + spec.band[1]
     speed = rewards.tolerance(info["forward_speed"], lo, hi, spec.target_speed, "linear") * info["standing"]
-    if spec.command == "forward":
+    if not spec.directed:
         return float(rewards.SPEED_REWARD_SCALE * speed - rewards.ENERGY_COEF * info["energy"])
     return float(rewards.SPEED_REWARD_SCALE * speed * rewards.heading_term(info["heading_error"])
                  - rewards.HIKING_ENERGY_COEF * info["energy"])

@@ -9,6 +9,7 @@ from d5rl.envs.a1.buffers import num_episodes
 from d5rl.registry import DatasetSpec, ScoreRef, TaskSpec, register
 
 ENTRY = "d5rl.envs.a1.task:A1Env"
+ENTRY_V1 = "d5rl.envs.a1.v1:A1EnvV1"
 SCORES_FILE = Path(__file__).with_name("scores.json")
 
 
@@ -81,5 +82,66 @@ register(TaskSpec(
     score_definition="(return - random policy return) / (expert return - random policy return); "
                      "expert = the best of the data agent 'heading' and the reference agent 'hiking' "
                      "(trained on the course), evaluated on the course (d5rl calibrate)",
+    group="a1",
+))
+
+# v1: the release's action range, reward, start and hiking course (d5rl.envs.a1.v1).  Their datasets replay
+# the v1 data agents, which must be trained and published first (d5rl.envs.a1.experts).
+SPEED_AGENTS_V1 = ("speed-0.5-v1", "speed-0.8-v1", "speed-1.0-v1")
+HIKING_AGENTS_V1 = ("goals-mixed-v1",)
+TRAIN_V1 = "python -m d5rl.envs.a1.experts train --agents {agents} (then `publish`; docs/datacards/a1.md, v1)"
+
+
+def _unavailable(agents: tuple[str, ...]) -> str | None:
+    if num_episodes(agents):
+        return None
+    return "the v1 A1 data agents are not published yet; train them: " + TRAIN_V1.format(agents=" ".join(agents))
+
+
+LOCOMOTION_DATA_V1 = DatasetSpec(
+    name="a1-v1-locomotion",
+    version=1,
+    generator="d5rl.envs.a1.data:ReplayBufferGenerator",
+    num_episodes=num_episodes(SPEED_AGENTS_V1),
+    episodes_per_shard=8,
+    generator_kwargs={"agents": SPEED_AGENTS_V1},
+    description="replay buffers of three SAC agents trained on the release's run task to track 0.5, 0.8 "
+                "and 1.0 m/s, first exploration to expert, replayed from committed policy snapshots",
+    unavailable=_unavailable(SPEED_AGENTS_V1),
+)
+HIKING_DATA_V1 = DatasetSpec(
+    name="a1-v1-hiking",
+    version=1,
+    generator="d5rl.envs.a1.data:ReplayBufferGenerator",
+    num_episodes=num_episodes(HIKING_AGENTS_V1),
+    episodes_per_shard=8,
+    generator_kwargs={"agents": HIKING_AGENTS_V1},
+    description="replay buffer of a SAC agent running toward random goals (the release's RunToward: "
+                "smooth and bumpy floors)",
+    unavailable=_unavailable(HIKING_AGENTS_V1),
+)
+for task_id, speed in (("a1-walk-v1", 0.75), ("a1-run-v1", 1.25)):
+    register(TaskSpec(
+        id=task_id,
+        entry_point=ENTRY_V1,
+        max_episode_steps=400,
+        env_kwargs={"task": "run", "target_speed": speed},
+        description=f"Unitree A1 tracking {speed} m/s on flat ground, as the D5RL release defines it",
+        dataset=LOCOMOTION_DATA_V1,
+        relabel="d5rl.envs.a1.data:relabel_speed",
+        score=_ref(task_id, _scores_table),
+        score_definition="(return - random policy return) / (expert return - random policy return)",
+        group="a1",
+    ))
+register(TaskSpec(
+    id="a1-hiking-v1",
+    entry_point=ENTRY_V1,
+    max_episode_steps=1000,
+    env_kwargs={"task": "hiking", "target_speed": 1.0},
+    description="Unitree A1 hiking the release's course (redrawn per episode) through four waypoints at 1 m/s",
+    dataset=HIKING_DATA_V1,
+    relabel="d5rl.envs.a1.data:relabel_hiking",
+    score=_ref("a1-hiking-v1", _scores_table),
+    score_definition="(return - random policy return) / (expert return - random policy return)",
     group="a1",
 ))

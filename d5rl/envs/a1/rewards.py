@@ -12,17 +12,25 @@ HIKING_ENERGY_COEF = 0.001
 UPRIGHT_MIN = 0.9  # body z-axis "up" component for a full standing term
 
 
-def tolerance(x, lower, upper, margin, sigmoid="linear"):
-    """1 inside [lower, upper], falling to 0 at ``margin`` outside (dm_control style, value_at_margin=0)."""
+def tolerance(x, lower, upper, margin, sigmoid="linear", value_at_margin=0.0):
+    """1 inside [lower, upper], falling to ``value_at_margin`` at ``margin`` outside (dm_control's
+    ``rewards.tolerance``; ``margin`` may be an array, one per entry of ``x``): linear reaches 0 at
+    ``margin / (1 - value_at_margin)``, quadratic at ``margin / sqrt(1 - value_at_margin)``, and gaussian
+    never does (it needs ``0 < value_at_margin < 1``)."""
     x = np.asarray(x, dtype=np.float64)
     dist = np.where(x < lower, lower - x, np.where(x > upper, x - upper, 0.0))
-    if margin <= 0:
+    if np.ndim(margin) == 0 and margin <= 0:
         return (dist == 0).astype(np.float64)
     d = dist / margin
     if sigmoid == "linear":
-        return np.clip(1.0 - d, 0.0, 1.0)
+        return np.clip(1.0 - d * (1.0 - value_at_margin), 0.0, 1.0)
     if sigmoid == "quadratic":
-        return np.where(d < 1.0, 1.0 - d * d, 0.0)
+        s = d * np.sqrt(1.0 - value_at_margin)
+        return np.where(s < 1.0, 1.0 - s * s, 0.0)
+    if sigmoid == "gaussian":
+        if not 0.0 < value_at_margin < 1.0:
+            raise ValueError(f"a gaussian tolerance needs 0 < value_at_margin < 1, got {value_at_margin}")
+        return np.exp(-0.5 * (d * np.sqrt(-2.0 * np.log(value_at_margin))) ** 2)
     raise ValueError(f"unknown sigmoid {sigmoid!r}")
 
 
@@ -35,6 +43,16 @@ def standing_term(upright, joint_pos):
     dev = np.asarray(joint_pos) - NOMINAL_POSE
     joints = tolerance(dev, -ACTION_SCALE, ACTION_SCALE, 0.5, "quadratic").mean(axis=-1)
     return up * joints
+
+
+def standing_term_v1(upright, joint_pos):
+    """The release's standing term (v1): upright tolerance (quadratic) times the PRODUCT over the 12
+    joints of gaussian tolerances around the nominal pose (flat within ± [0.2, 0.4, 0.4] rad, 0.5 at as
+    far again), so one joint far from its band lowers the whole term."""
+    up = tolerance(upright, UPRIGHT_MIN, np.inf, UPRIGHT_MIN, "quadratic")
+    q = np.asarray(joint_pos, dtype=np.float64)
+    joints = tolerance(q, NOMINAL_POSE - ACTION_SCALE, NOMINAL_POSE + ACTION_SCALE, ACTION_SCALE, "gaussian", 0.5)
+    return up * joints.prod(axis=-1)
 
 
 def speed_term(forward_speed, target):
