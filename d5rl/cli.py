@@ -16,6 +16,7 @@ def _table(rows: list[list[str]], header: list[str]) -> str:
 
 
 def cmd_list(args) -> int:
+    from d5rl.datasets.generation import full_size
     from d5rl.datasets.status import dataset_status
     from d5rl.registry import get_spec, list_tasks
 
@@ -24,7 +25,7 @@ def cmd_list(args) -> int:
         s = get_spec(tid)
         status, _ = dataset_status(s)
         ds = s.dataset
-        rows.append([tid, s.max_episode_steps, ds.name if ds else "-", ds.num_episodes if ds else "-", status])
+        rows.append([tid, s.max_episode_steps, ds.name if ds else "-", full_size(ds) if ds else "-", status])
     print(_table(rows, ["task", "horizon", "dataset", "episodes", "status"]))
     return 0
 
@@ -32,7 +33,7 @@ def cmd_list(args) -> int:
 def cmd_info(args) -> int:
     import numpy as np
 
-    from d5rl.datasets.generation import dataset_root
+    from d5rl.datasets.generation import dataset_root, full_size
     from d5rl.datasets.status import dataset_status, disk_bytes, human_bytes
     from d5rl.registry import get_spec, make_env
 
@@ -54,7 +55,7 @@ def cmd_info(args) -> int:
         return 0
     d = s.dataset
     status, manifest = dataset_status(s)
-    print(f"  dataset:      {d.name} v{d.version}, {d.num_episodes} episodes, generator {d.generator}")
+    print(f"  dataset:      {d.name} v{d.version}, {full_size(d)} episodes, {'importer' if d.imported else 'generator'} {d.producer}")
     if d.description:
         print(f"                {d.description}")
     root = dataset_root(d)
@@ -134,7 +135,11 @@ def cmd_render(args) -> int:
 
         if args.episode < 0:
             raise D5RLError(f"--episode must be >= 0, got {args.episode}", "episodes are numbered from 0")
-        n_episodes = spec.dataset.num_episodes if spec.dataset is not None else 0
+        from d5rl.datasets.generation import full_size, not_imported_error
+
+        n_episodes = full_size(spec.dataset) if spec.dataset is not None else 0
+        if spec.dataset is not None and spec.dataset.imported and not n_episodes:
+            raise not_imported_error(spec, spec.dataset)
         if args.episode >= n_episodes:
             raise D5RLError(f"{args.task}'s dataset has no episode {args.episode}",
                             f"its episodes are numbered 0 to {n_episodes - 1}" if n_episodes
@@ -258,7 +263,7 @@ _PLUGINS = [
     ("d5rl.runner.cli", "add_bench_parser"),
     ("d5rl.runner.cli", "add_report_parser"),
     ("d5rl.browse.server", "add_browse_parser"),
-    ("d5rl.envs.kitchen.d4rl_import", "add_import_d4rl_kitchen_parser"),
+    ("d5rl.envs.kitchen.human", "add_import_kitchen_human_parser"),
     ("d5rl.envs.a1.calibrate", "add_calibrate_parser"),
 ]
 

@@ -3,6 +3,8 @@
 One id grammar, parsed here and nowhere else::
 
     <family>-<name>-v<version>      e.g. a1-walk-v0, kitchen-standard-mixed-v0, wx-sorting-v0
+    <family>-<name>-<variant>-v<version>   the same task on another dataset (a dataset variant),
+                                    e.g. kitchen-standard-mixed-human-v0 (see :func:`variant_id`)
 
 Each env family registers its own tasks next to its code, in
 ``d5rl/envs/<family>/registration.py``, by calling :func:`register`.  The global
@@ -56,8 +58,9 @@ class DatasetSpec:
 
     name: str  # directory name under $D5RL_HOME/datasets, e.g. "a1-locomotion"
     version: int  # bump when the generated content changes (CHANGELOG line too)
-    generator: str  # "module:Class", a d5rl.datasets.generation.EpisodeGenerator
-    num_episodes: int  # full size of the dataset
+    # "module:Class", a d5rl.datasets.generation.EpisodeGenerator; None for an imported dataset
+    generator: str | None
+    num_episodes: int  # full size of the dataset (an imported one: as many as were imported, 0 here)
     episodes_per_shard: int = 16  # unit of work, resume and atomic write
     generator_kwargs: dict = dataclasses.field(default_factory=dict)
     default_seed: int = 0
@@ -68,6 +71,19 @@ class DatasetSpec:
     # Why the dataset cannot be made yet, in one line that names the command that fixes it (e.g. its
     # data agents are not trained); generating or loading it raises this before any work.
     unavailable: str | None = None
+    # An imported dataset (data d5rl cannot make, e.g. human demonstrations): "module:attr" of its
+    # importer, whose ``version`` identifies the conversion and whose ``how`` says, in one line, which
+    # commands download and import it.  Exactly one of ``generator`` and ``importer`` is set.
+    importer: str | None = None
+
+    @property
+    def imported(self) -> bool:
+        return self.importer is not None
+
+    @property
+    def producer(self) -> str:
+        """The code that writes this dataset: its generator, or its importer."""
+        return self.generator if self.generator is not None else self.importer
 
 
 @dataclasses.dataclass(frozen=True)
@@ -104,6 +120,12 @@ class TaskSpec:
     # What the agent observes: "state" (a flat float vector) or "pixels" (camera frames +
     # proprioception).  Picks the settings layer (pixel agents: batch 64, ...) and frame stacking.
     observation: str = "state"
+    # Other datasets of the same task, by variant name: each registers as a task of its own,
+    # ``variant_id(id, name)``, identical but for its dataset (e.g. {"human": <imported demos>}).
+    dataset_variants: dict = dataclasses.field(default_factory=dict)
+    # On a variant's spec: the variant's name and the id of the task whose data it replaces.
+    variant: str = ""
+    variant_of: str = ""
 
     @property
     def parsed(self) -> TaskId:
@@ -118,13 +140,32 @@ class TaskSpec:
         return self.group or self.family
 
 
+def variant_id(task_id: str, variant: str) -> str:
+    """The id of ``task_id`` on its dataset variant ``variant``: the variant is the name's last part,
+    ``kitchen-standard-mixed-v0`` + ``human`` = ``kitchen-standard-mixed-human-v0``."""
+    t = parse_task_id(task_id)
+    if not re.fullmatch(r"[a-z0-9]+", variant or ""):
+        raise TaskIdError(f"{variant!r} is not a dataset variant name", "use lowercase letters and digits")
+    return str(TaskId(t.family, f"{t.name}-{variant}", t.version))
+
+
+def base_task(task_id: str) -> str:
+    """The task whose dataset a variant replaces (the task itself when it is no variant)."""
+    spec = get_spec(task_id)
+    return spec.variant_of or spec.id
+
+
 _REGISTRY: dict[str, TaskSpec] = {}
 _LOADED = False
 
 
 def register(spec: TaskSpec) -> TaskSpec:
-    """Add a task (called by family ``registration`` modules at import)."""
+    """Add a task (called by family ``registration`` modules at import), and one task per dataset
+    variant (:func:`variant_id`)."""
     parse_task_id(spec.id)
+    for d in [spec.dataset, *spec.dataset_variants.values()]:
+        if d is not None and (d.generator is None) == (d.importer is None):
+            raise ValueError(f"{spec.id}: dataset {d.name} needs exactly one of generator and importer")
     if spec.score_from not in ("return", "info"):
         raise ValueError(f"{spec.id}: score_from must be 'return' or 'info', got {spec.score_from!r}")
     if spec.observation not in ("state", "pixels"):
@@ -133,6 +174,10 @@ def register(spec: TaskSpec) -> TaskSpec:
         raise ValueError(f"task {spec.id} registered twice with different specs")
     _REGISTRY[spec.id] = spec
     _register_with_gymnasium(spec)
+    for name, dspec in spec.dataset_variants.items():
+        register(dataclasses.replace(
+            spec, id=variant_id(spec.id, name), dataset=dspec, dataset_variants={}, variant=name,
+            variant_of=spec.id, description=f"{spec.description}; dataset variant {name!r} ({dspec.name})"))
     return spec
 
 

@@ -205,7 +205,7 @@ def test_evaluate_refuses_zero_episodes():
     ("nan", "observations has 1 NaN or infinite values (first in row 2)"),
     ("short_terminals", "terminals has 5 rows"),
 ])
-def test_import_d4rl_kitchen_refuses_a_broken_file(capsys, tmp_path, damage, needle):
+def test_import_kitchen_human_refuses_a_broken_d4rl_file(capsys, tmp_path, damage, needle):
     h5py = pytest.importorskip("h5py")
     n = 9
     obs = np.zeros((n, 60), np.float32)
@@ -223,6 +223,5 @@ def test_import_d4rl_kitchen_refuses_a_broken_file(capsys, tmp_path, damage, nee
         if damage != "no_actions":
             f["actions"] = actions
         f["terminals"] = terminals
-    out = tmp_path / "imported"
-    one_line_error(capsys, ["import-d4rl-kitchen", str(path), "--out", str(out)], needle)
-    assert not out.exists()
+    one_line_error(capsys, ["import-kitchen-human", str(path)], needle)
+    assert not paths.home().exists()  # refused before anything was written

@@ -41,7 +41,7 @@ def datacard(spec) -> str | None:
 
 def task_summary(task_id: str, sizes: dict | None = None) -> dict:
     """One task: spec, dataset spec, what is on disk (status, episodes, bytes), score references."""
-    from d5rl.datasets.generation import dataset_root
+    from d5rl.datasets.generation import dataset_root, full_size
 
     spec = get_spec(task_id)
     status, manifest = dataset_status(spec)
@@ -55,7 +55,7 @@ def task_summary(task_id: str, sizes: dict | None = None) -> dict:
     d = spec.dataset
     if d is None:
         return out
-    out["dataset"] = {"name": d.name, "version": d.version, "episodes": d.num_episodes, "generator": d.generator,
+    out["dataset"] = {"name": d.name, "version": d.version, "episodes": full_size(d), "generator": d.producer,
                       "description": d.description, "seed": d.default_seed}
     if manifest is not None:
         root = dataset_root(d)

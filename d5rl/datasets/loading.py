@@ -89,6 +89,8 @@ def load_dataset(
 
     spec = get_spec(task)
     dspec = generation.dataset_spec(spec)
+    if dspec.imported:
+        dspec = _imported_spec(spec, dspec, seed)
     seed = generation.check_seed(dspec.default_seed if seed is None else seed)
     wanted = generation.check_episodes(episodes, dspec)
     _check_derived_kwargs(spec, dspec, derived_kwargs)
@@ -103,12 +105,28 @@ def load_dataset(
             return _open(spec, dspec, seed, root, wanted, episodes is not None, in_memory, limit, obs_keys,
                          workers, progress, derived_kwargs)
         except _NotReady as e:
-            if not generate or attempt == 2:
+            if not generate or attempt == 2 or dspec.imported:
                 raise e.error from None
             if e.damaged:
                 print(f"warning: {e.error.message}; regenerating it", file=sys.stderr, flush=True)
             generation.generate(spec, seed=seed, num_episodes=wanted, workers=workers, progress=progress)
     raise AssertionError("unreachable")
+
+
+def _imported_spec(spec: TaskSpec, dspec, seed):
+    """An imported dataset's spec with its full size as imported (d5rl cannot make more); one-line
+    errors when it was not imported, or for a seed (imported data has none)."""
+    import dataclasses
+
+    from d5rl.datasets import generation
+
+    if seed is not None and seed != dspec.default_seed:
+        raise DatasetArgumentError(f"{spec.id}'s dataset is imported and has no seed; {seed!r} was given",
+                                   "omit seed= (--seed)")
+    path = generation.dataset_root(dspec) / fmt.MANIFEST
+    if not path.exists():
+        raise generation.not_imported_error(spec, dspec)
+    return dataclasses.replace(dspec, num_episodes=fmt.read_manifest(path)["num_episodes"])
 
 
 def _check_derived_kwargs(spec: TaskSpec, dspec, kwargs: dict) -> None:
@@ -140,6 +158,8 @@ def _open(spec, dspec, seed, root, wanted, partial, in_memory, limit, obs_keys, 
 
     manifest_path = root / fmt.MANIFEST
     have = fmt.read_manifest(manifest_path)["num_episodes"] if manifest_path.exists() else 0
+    if have < wanted and dspec.imported:
+        raise _NotReady(generation.not_imported_error(spec, dspec))
     if have < wanted:
         raise _NotReady(DatasetNotFoundError(
             f"dataset {dspec.name} (seed {seed}) has {have} of the {wanted} episodes asked for in {root}",
@@ -159,7 +179,8 @@ def _open(spec, dspec, seed, root, wanted, partial, in_memory, limit, obs_keys, 
                 f"(generated with --episodes); run `d5rl generate {spec.id}` for the full dataset",
                 stacklevel=4,
             )
-        repair = f"run `d5rl generate {spec.id}` (it regenerates damaged shards and keeps the rest)"
+        repair = (resolve(dspec.importer).how if dspec.imported else
+                  f"run `d5rl generate {spec.id}` (it regenerates damaged shards and keeps the rest)")
         shard_dirs, records = [], []
         for entry in manifest["shards"]:
             if entry["episodes"][0] >= n:

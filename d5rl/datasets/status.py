@@ -27,9 +27,11 @@ def dataset_status(spec) -> tuple[str, dict | None]:
         try:
             generation.check_current(m, spec.dataset, spec.dataset.default_seed, root)
         except D5RLError:
-            return "stale (generate --force)", m
-        full = m["num_episodes"] >= spec.dataset.num_episodes
+            return ("stale (import again)" if spec.dataset.imported else "stale (generate --force)"), m
+        full = spec.dataset.imported or m["num_episodes"] >= spec.dataset.num_episodes
         return ("ready" if full else f"partial ({m['num_episodes']} ep)"), m
+    if spec.dataset.imported:
+        return "not imported", None
     if (root / "shards").exists():
         return "incomplete (resume with generate)", None
     return "not generated", None

@@ -14,10 +14,15 @@ def resolve_tasks(names: list[str]) -> list[str]:
     """Task ids; a family or prefix (``a1``, ``kitchen-standard``) stands for all its registered tasks
     except the ``-state`` twins of camera tasks (the benchmark's rows) and tasks whose dataset cannot be
     made yet (``DatasetSpec.unavailable``: an explicit id says why), a glob (``'kitchen-*-state-v0'``)
-    for those it matches."""
+    for those it matches.  A prefix or glob takes a task on a dataset variant (``...-human-v0``) only when
+    it names the variant: its dataset may not be on this machine."""
     import fnmatch
 
-    from d5rl.registry import TASK_ID_RE, get_spec, list_tasks
+    from d5rl.registry import TASK_ID_RE, base_task, get_spec, list_tasks
+
+    def tasks_for(part: str) -> list[str]:
+        words = set(part.replace("*", "-").split("-"))
+        return [t for t in list_tasks() if not get_spec(t).variant or get_spec(t).variant in words]
 
     out: list[str] = []
     for name in names:
@@ -26,15 +31,15 @@ def resolve_tasks(names: list[str]) -> list[str]:
             if not part:
                 continue
             if any(c in part for c in "*?["):
-                matches = fnmatch.filter(list_tasks(), part)
+                matches = fnmatch.filter(tasks_for(part), part)
                 if not matches:
                     raise D5RLError(f"no registered task matches {part!r}", "run `d5rl list` to see the task ids")
                 out += matches
             elif TASK_ID_RE.match(part):
                 out.append(get_spec(part).id)  # unknown ids raise with suggestions
             else:
-                matches = [t for t in list_tasks() if t.startswith(part + "-")
-                           and (not t.endswith("-state-v0") or "state" in part)
+                matches = [t for t in tasks_for(part) if t.startswith(part + "-")
+                           and (not base_task(t).endswith("-state-v0") or "state" in part)
                            and not (get_spec(t).dataset and get_spec(t).dataset.unavailable)]
                 if not matches:
                     raise D5RLError(f"no registered task is or starts with {part!r}",

@@ -73,7 +73,15 @@ PAPER: dict[str, dict[str, dict[str, tuple[float, float | None]]]] = {
 
 
 def paper_task(task: str) -> str:
-    """The paper's row for one of our tasks: a ``-state`` twin maps to its camera task."""
+    """The paper's row for one of our tasks: a ``-state`` twin maps to its camera task, a task on a
+    dataset variant (the kitchen's imported human data) to the task it re-uses."""
+    from d5rl.errors import D5RLError
+    from d5rl.registry import base_task
+
+    try:
+        task = base_task(task)
+    except D5RLError:  # a task only a custom job knows
+        pass
     return task.replace("-state-v", "-v")
 
 

@@ -155,7 +155,8 @@ def _data_record(ds) -> dict | None:
     meta = getattr(ds, "metadata", {}) or {}
     if not all(k in meta for k in RESULT_IDENTITY_KEYS):
         return None
-    return {**{k: meta[k] for k in RESULT_IDENTITY_KEYS}, "episodes": int(ds.num_episodes)}
+    source = {"source": meta["source"]} if "source" in meta else {}  # an imported dataset: which file
+    return {**{k: meta[k] for k in RESULT_IDENTITY_KEYS}, "episodes": int(ds.num_episodes), **source}
 
 
 def _write_config(run_dir: Path, settings, agent_cfg: Config, seed: int, resumed: bool,

@@ -14,6 +14,17 @@ STANDARD_DATASET = DatasetSpec(
     description="scripted demonstrations of 22 four-subtask combinations in a fixed order (paper: 563 episodes)",
     derived="d5rl.envs.kitchen.data:renders",
 )
+HUMAN_DATASET = DatasetSpec(
+    name="kitchen-standard-human",
+    version=1,
+    generator=None,
+    importer="d5rl.envs.kitchen.human:KitchenHumanImport",
+    num_episodes=0,  # as many as the imported file holds
+    episodes_per_shard=16,
+    description="the relay-policy-learning human demonstrations the paper used, imported with "
+                "`d5rl import-kitchen-human` (Minari D4RL/kitchen/*-v2 or a D4RL kitchen file)",
+    derived="d5rl.envs.kitchen.data:renders",
+)
 SCORE = (
     "fraction of the 4 target subtasks whose object reached its goal configuration during the episode "
     "(info['score'] at the episode's end; 1.0 = all four)"
@@ -40,6 +51,7 @@ for name, tasks, desc in (
                 score_definition=SCORE,
                 group="kitchen-standard",
                 observation=obs,
+                dataset_variants={"human": HUMAN_DATASET},  # kitchen-standard-<name>[-state]-human-v0
             )
         )
 

@@ -87,11 +87,11 @@ def test_dataset_round_trip_relabel_and_renders(monkeypatch, tmp_path):
     assert batch["observations"]["pixels/overview"].shape == (4, 16, 16, 9)
 
 
-def test_import_d4rl_kitchen_file(tmp_path):
+def test_imported_human_data_render_for_the_camera_tasks(tmp_path):
+    """A tiny D4RL-layout file imported with its camera frames: the camera task's dataset is the imported
+    states rendered (the importer itself: test_kitchen_human.py)."""
     h5py = pytest.importorskip("h5py")
-    from d5rl.cli import main
     from d5rl.envs.kitchen import model as km
-    from d5rl.envs.kitchen.d4rl_import import load_imported
 
     rng = np.random.default_rng(0)
     n = 9  # two episodes: rows 0-4 and 5-8
@@ -107,11 +107,13 @@ def test_import_d4rl_kitchen_file(tmp_path):
         f["rewards"] = np.zeros(n, np.float32)
         f["terminals"] = terminals
         f["timeouts"] = np.zeros(n, bool)
-    out = tmp_path / "imported"
-    assert main(["import-d4rl-kitchen", str(path), "--out", str(out), "--size", "16", "--workers", "1"]) == 0
-    ds = load_imported(out, size=16, progress=False)
+    assert main(["import-kitchen-human", str(path), "--size", "16", "--workers", "1", "--no-progress"]) == 0
+    ds = load_dataset("kitchen-standard-mixed-human-v0", size=16, progress=False, workers=1)
     assert ds.num_episodes == 2 and list(ds.episode_lengths) == [4, 3]
     np.testing.assert_allclose(ds.arrays["observations/proprio"], obs[:, :9])
-    assert ds.arrays["observations/pixels/overview"].shape == (n, 16, 16, 3)
+    frames = ds.arrays["observations/pixels/overview"]
+    assert frames.shape == (n, 16, 16, 3)
+    env16 = KitchenEnv(image_size=16)
+    env16.set_state(np.asarray(ds.arrays["states"][3]))
+    np.testing.assert_array_equal(env16.render_cameras()["overview"], frames[3])
     np.testing.assert_array_equal(ds.rewards[:4], [0, 0, 1, 1])  # microwave (a mixed subtask) from row 3 on
-    assert main(["import-d4rl-kitchen", str(tmp_path / "missing.hdf5"), "--out", str(out)]) == 2
