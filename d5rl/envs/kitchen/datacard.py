@@ -1,11 +1,14 @@
 """Statistics for the standard kitchen data card, next to the paper's numbers.
 
     python -m d5rl.envs.kitchen.datacard [--episodes N] [--subtask-seeds 30] [--combo-seeds 4]
+    python -m d5rl.envs.kitchen.datacard --compare-human [--episodes N]
 
 Loads (generating if needed) the ``kitchen-standard`` dataset, computes its size, episode
 lengths, returns under both tasks' rewards and objects per episode, and measures the
 scripted demonstrator's success rates (each subtask alone; every combination).  Prints
-Markdown tables for ``docs/datacards/kitchen-standard.md``.
+Markdown tables for ``docs/datacards/kitchen-standard.md``.  ``--compare-human`` instead puts the
+scripted data next to the imported human data (``d5rl import-kitchen-human``): lengths, subtasks per
+episode, the orders they are done in, action statistics.
 """
 
 from __future__ import annotations
@@ -60,6 +63,71 @@ def dataset_stats(episodes: int | None = None, workers: int | None = None) -> di
     return out
 
 
+def comparison_stats(task: str, episodes: int | None = None, workers: int | None = None) -> dict:
+    """What the scripted and the human data can be compared on, from what both store: episode lengths,
+    ``infos/completed`` (which subtasks, in which order: by the step each first reaches its goal) and
+    the actions."""
+    from collections import Counter
+
+    from d5rl.datasets.loading import load_dataset
+    from d5rl.envs.kitchen.human import completion_order
+
+    ds = load_dataset(task, episodes=episodes, workers=workers, render=False, progress=False)
+    done = np.asarray(ds.arrays["infos/completed"])
+    actions = np.asarray(ds.arrays["actions"], np.float64)
+    bounds = list(zip(ds.episode_starts, ds.episode_starts + ds.episode_lengths))
+    orders = [tuple(completion_order(done[a:b])) for a, b in bounds]
+    counts = np.array([len(o) for o in orders])
+    # consecutive actions within an episode (not across its boundary)
+    inside = np.ones(len(actions), bool)
+    inside[np.asarray(ds.episode_starts)] = False
+    first = Counter(o[0] if o else "none" for o in orders)
+    n = ds.num_episodes
+    return {
+        "episodes": n,
+        "transitions": ds.num_transitions,
+        "length_mean": float(ds.episode_lengths.mean()),
+        "length_min": int(ds.episode_lengths.min()),
+        "length_max": int(ds.episode_lengths.max()),
+        "subtasks_mean": float(counts.mean()),
+        "subtasks_hist": {k: int((counts == k).sum()) for k in range(8) if (counts == k).any()},
+        "orders": len(set(orders)),
+        "top_orders": [(list(o), c) for o, c in Counter(orders).most_common(3)],
+        "first_subtask": {k: c / n for k, c in first.most_common()},
+        "action_abs_mean": float(np.abs(actions).mean()),
+        "action_std_mean": float(actions.std(axis=0).mean()),
+        "action_saturated": float((np.abs(actions) >= 0.99).mean()),
+        "action_change_mean": float(np.abs(np.diff(actions, axis=0))[inside[1:]].mean()) if inside[1:].any() else 0.0,
+    }
+
+
+def print_comparison(scripted: dict, human: dict | None) -> None:
+    """The side-by-side Markdown table (``-`` where the human data are not imported)."""
+    def col(s: dict | None, f) -> str:
+        return "-" if s is None else f(s)
+
+    rows = [
+        ("episodes", lambda s: f"{s['episodes']}"),
+        ("transitions", lambda s: f"{s['transitions']:,}"),
+        ("episode length mean (min-max)", lambda s: f"{s['length_mean']:.1f} ({s['length_min']}-{s['length_max']})"),
+        ("subtasks done per episode, mean", lambda s: f"{s['subtasks_mean']:.2f}"),
+        ("episodes by number of subtasks done (subtasks: episodes)",
+         lambda s: " / ".join(f"{k}: {v}" for k, v in s["subtasks_hist"].items())),
+        ("distinct orders of completion", lambda s: f"{s['orders']}"),
+        ("commonest orders (episodes)",
+         lambda s: "; ".join(f"{' > '.join(o) or 'none'} ({c})" for o, c in s["top_orders"])),
+        ("first subtask done (share of episodes)",
+         lambda s: ", ".join(f"{k} {100 * v:.0f}%" for k, v in s["first_subtask"].items())),
+        ("mean abs action", lambda s: f"{s['action_abs_mean']:.3f}"),
+        ("action std (mean over the 9 dims)", lambda s: f"{s['action_std_mean']:.3f}"),
+        ("actions at the bounds (abs >= 0.99)", lambda s: f"{100 * s['action_saturated']:.1f}%"),
+        ("mean abs change between consecutive actions", lambda s: f"{s['action_change_mean']:.3f}"),
+    ]
+    print("\n| statistic | scripted (`kitchen-standard`) | human (`kitchen-standard-human`) |\n|---|---|---|")
+    for name, f in rows:
+        print(f"| {name} | {col(scripted, f)} | {col(human, f)} |")
+
+
 def demonstrator_rates(subtask_seeds: int, combo_seeds: int) -> dict:
     from d5rl.envs.kitchen.data import COMBINATIONS
     from d5rl.envs.kitchen.demonstrator import Demonstrator
@@ -101,9 +169,23 @@ def main() -> None:
     p.add_argument("--combo-seeds", type=int, default=4)
     p.add_argument("--skip-dataset", action="store_true")
     p.add_argument("--skip-demonstrator", action="store_true")
+    p.add_argument("--compare-human", action="store_true",
+                   help="only the scripted data next to the imported human data (the first N episodes of each)")
     args = p.parse_args()
-    print(f"<!-- generated by `python -m d5rl.envs.kitchen.datacard` on {platform.machine()}, "
-          f"{time.strftime('%Y-%m-%d', time.gmtime())} -->")
+    print(f"<!-- generated by `python -m d5rl.envs.kitchen.datacard{' --compare-human' if args.compare_human else ''}"
+          f"` on {platform.machine()}, {time.strftime('%Y-%m-%d', time.gmtime())} -->")
+    if args.compare_human:
+        from d5rl.datasets.generation import full_size
+        from d5rl.registry import get_spec
+
+        human_task = "kitchen-standard-mixed-state-human-v0"
+        have = full_size(get_spec(human_task).dataset)
+        human = (comparison_stats(human_task, None if args.episodes is None else min(args.episodes, have),
+                                  args.workers) if have else None)
+        if human is None:
+            print(f"<!-- human data not imported: {get_spec(human_task).dataset.name} -->")
+        print_comparison(comparison_stats("kitchen-standard-mixed-state-v0", args.episodes, args.workers), human)
+        return
     if not args.skip_dataset:
         s = dataset_stats(args.episodes, args.workers)
         print("\n| statistic | d5rl (this dataset) | paper (RPL data re-rendered) |\n|---|---|---|")

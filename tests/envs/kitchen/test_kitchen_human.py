@@ -230,3 +230,33 @@ def test_human_tasks_are_variants_of_the_standard_tasks():
     assert not any("human" in t for t in resolve_tasks(["kitchen-standard"]))
     assert resolve_tasks(["kitchen-standard-mixed-human"]) == ["kitchen-standard-mixed-human-v0"]
     assert "kitchen-standard-mixed-state-human-v0" in resolve_tasks(["kitchen-standard-*-human-v0"])
+
+
+def test_comparison_statistics_of_the_imported_data(tmp_path, monkeypatch, scripted, capsys):
+    from d5rl.browse.catalog import task_summary
+    from d5rl.envs.kitchen.datacard import comparison_stats, print_comparison
+
+    root = write_minari(tmp_path / "minari", scripted)
+    assert main(["import-kitchen-human", str(root), "--no-render", "--no-progress"]) == 0
+    capsys.readouterr()
+    summary = task_summary(TASK)  # what `d5rl browse` lists
+    assert summary["status"] == "ready" and summary["dataset"]["episodes"] == 2
+    s = comparison_stats(TASK)
+    lengths = [len(a) for _, _, a, _ in scripted]
+    assert (s["episodes"], s["transitions"], s["length_min"], s["length_max"]) == (2, sum(lengths), min(lengths),
+                                                                                    max(lengths))
+    # orders: each subtask by the first step its column is true, computed here per subtask
+    orders = []
+    for *_, completed in scripted:
+        firsts = {SUBTASK_NAMES[j]: np.flatnonzero(completed[:, j])[0] for j in range(7) if completed[:, j].any()}
+        orders.append(tuple(sorted(firsts, key=firsts.get)))
+    assert s["orders"] == len(set(orders)) and s["subtasks_mean"] == np.mean([len(o) for o in orders])
+    assert s["first_subtask"] == {orders[0][0]: 0.5, orders[1][0]: 0.5}
+    acts = [a.astype(np.float64) for _, _, a, _ in scripted]
+    flat = np.concatenate(acts)
+    assert s["action_abs_mean"] == pytest.approx(np.abs(flat).mean())
+    assert s["action_saturated"] == pytest.approx((np.abs(flat) >= 0.99).mean())
+    assert s["action_change_mean"] == pytest.approx(np.concatenate([np.abs(np.diff(a, axis=0)) for a in acts]).mean())
+    print_comparison(s, None)
+    table = capsys.readouterr().out
+    assert f"| episode length mean (min-max) | {np.mean(lengths):.1f} ({min(lengths)}-{max(lengths)}) | - |" in table
