@@ -8,6 +8,17 @@
     python -m d5rl.envs.a1.experts publish               # ship them to d5rl/envs/a1/policies
     python -m d5rl.envs.a1.experts export                # between machines (see below)
 
+The agents of the ``a1-*-v1`` tasks (:mod:`d5rl.envs.a1.v1`, the release's action range and reward) end
+in ``-v1`` and train the same way::
+
+    python -m d5rl.envs.a1.experts train --agents speed-0.5-v1 speed-0.8-v1 speed-1.0-v1 --steps 300000 \
+        --snapshot-every 20000 --first-segment 1250 --single-thread
+    python -m d5rl.envs.a1.experts train --agents goals-mixed-v1 goals-smooth-v1 --steps 300000 \
+        --snapshot-every 20000 --first-segment 1250 --single-thread
+    python -m d5rl.envs.a1.experts train --agents run-1.25-v1 --steps 300000 --snapshot-every 20000 --single-thread
+    python -m d5rl.envs.a1.experts train --agents hiking-v1 --init-from goals-mixed-v1 --steps 100000 \
+        --snapshot-every 20000 --single-thread
+
 (the commands as run, one process per core: ``docs/datacards/a1.md``).
 
 Every agent is SAC with a pair of LayerNorm critics at an update-to-data ratio of 2 (our
@@ -379,13 +390,15 @@ def main(argv=None) -> None:
     e.add_argument("--work-root", type=Path, default=WORK_DIR)
     e.add_argument("--saved-dir", type=Path, default=SAVED_DIR)
     c = sub.add_parser("check", help="mean forward speed and falls of each agent's final policy")
-    c.add_argument("--agents", nargs="+", choices=sorted(AGENTS), default=sorted(AGENTS))
+    c.add_argument("--agents", nargs="+", choices=sorted(AGENTS),
+                   help="default: every agent with a final policy in --policy-dir")
     c.add_argument("--episodes", type=int, default=10)
     c.add_argument("--seed", type=int, default=0)
     c.add_argument("--policy-dir", type=Path, default=POLICY_DIR,
                    help=f"whose final policies (default: the shipped ones; {SAVED_DIR / 'policies'}: the trained ones)")
     p = sub.add_parser("publish", help=f"ship finished agents' policies to {POLICY_DIR} (the datasets replay them)")
-    p.add_argument("--agents", nargs="+", choices=sorted(AGENTS), default=sorted(AGENTS))
+    p.add_argument("--agents", nargs="+", choices=sorted(AGENTS),
+                   help="default: every agent with a final policy in --policy-dir")
     p.add_argument("--policy-dir", type=Path, default=SAVED_DIR / "policies")
     args = ap.parse_args(argv)
     if args.cmd == "train":
@@ -399,11 +412,13 @@ def main(argv=None) -> None:
     elif args.cmd == "export":
         export(args.work_root, args.saved_dir)
     elif args.cmd == "publish":
-        publish(args.agents, args.policy_dir)
+        publish(args.agents or [a for a in sorted(AGENTS) if (args.policy_dir / a / "final.npz").exists()],
+                args.policy_dir)
     else:
         from d5rl.envs.a1.speedcheck import main as check
 
-        check(args.agents, args.episodes, args.seed, args.policy_dir)
+        agents = args.agents or [a for a in sorted(AGENTS) if (args.policy_dir / a / "final.npz").exists()]
+        check(agents, args.episodes, args.seed, args.policy_dir)
 
 
 if __name__ == "__main__":

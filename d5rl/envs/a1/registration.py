@@ -89,6 +89,8 @@ register(TaskSpec(
 # the v1 data agents, which must be trained and published first (d5rl.envs.a1.experts).
 SPEED_AGENTS_V1 = ("speed-0.5-v1", "speed-0.8-v1", "speed-1.0-v1")
 HIKING_AGENTS_V1 = ("goals-mixed-v1",)
+SCORE_AGENTS.update({"a1-walk-v1": SPEED_AGENTS_V1 + ("run-1.25-v1",), "a1-run-v1": SPEED_AGENTS_V1 + ("run-1.25-v1",),
+                     "a1-hiking-v1": ("goals-mixed-v1", "goals-smooth-v1", "hiking-v1")})
 TRAIN_V1 = "python -m d5rl.envs.a1.experts train --agents {agents} (then `publish`; docs/datacards/a1.md, v1)"
 
 

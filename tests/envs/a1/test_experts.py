@@ -94,3 +94,35 @@ def test_trainer_refuses_mixed_observation_sizes(tmp_path):
 
     with pytest.raises(ValueError, match="observation sizes"):
         Trainer(["speed-0.5", "heading"], 10, 0, 5, 5, 1, tmp_path)
+
+
+@pytest.mark.slow
+def test_v1_agents_train_resume_from_an_export_and_check(tmp_path, capsys):
+    """The v1 agents (the release's tasks) go through the same trainer: snapshots, export without buffers,
+    resume elsewhere with the buffer refilled on the v1 envs, a reference trained from a data agent, check."""
+    from d5rl.envs.a1.experts import Trainer, main
+    from d5rl.envs.a1.resume import export
+
+    policies, saved = tmp_path / "policies", tmp_path / "saved"
+
+    def trainer(machine, agents=("goals-mixed-v1", "goals-smooth-v1"), **kw):
+        return Trainer(list(agents), steps=40, seed=0, snapshot_every=20, start_steps=20, utd=1,
+                       work_dir=tmp_path / machine / "+".join(agents), policy_dir=policies, saved_root=saved, **kw)
+
+    assert not trainer("a").run(max_minutes=0, log_every=10**9)  # stops at the first boundary (step 20)
+    export(tmp_path / "a", saved)
+    assert trainer("b").run(log_every=10**9)  # resumes from the export, refilling 20 steps per agent
+    log = json.loads((policies / "goals-mixed-v1" / "log.json").read_text())
+    assert [s["start_step"] for s in log["segments"]] == [0, 20] and log["steps"] == 40
+    assert log["env_version"] == 1 and log["task"] == "run_toward" and log["floors"] == "mixed"
+    for f in ("snapshot-01.npz", "final.npz"):
+        assert (policies / "goals-smooth-v1" / f).exists()
+    # the hiking reference starts from the goals agent's final learner
+    learners = tmp_path / "b" / "learners"
+    assert (learners / "goals-mixed-v1.msgpack").exists()
+    hiking = Trainer(["hiking-v1"], steps=25, seed=0, snapshot_every=20, start_steps=20, utd=1,
+                     work_dir=tmp_path / "b" / "hiking-v1", policy_dir=policies, init_from="goals-mixed-v1")
+    assert hiking.run(log_every=10**9)
+    main(["check", "--agents", "goals-smooth-v1", "--episodes", "1", "--policy-dir", str(policies)])
+    out = capsys.readouterr().out
+    assert "| `goals-smooth-v1` | deterministic | 1.00 |" in out
