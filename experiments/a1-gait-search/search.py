@@ -1,4 +1,4 @@
-"""How fast can the A1 of ``a1-run-v0`` move at all?  A cross-entropy search over open-loop periodic gaits.
+"""How fast can the A1 of ``a1-run-v0`` move within v0's action range?  A cross-entropy search over open-loop periodic gaits.
 
     python experiments/a1-gait-search/search.py [--iters 30] [--pop 48] [--seed 0] [--out result.json]
 

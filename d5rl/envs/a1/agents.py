@@ -46,8 +46,8 @@ AGENTS = {
     "speed-1.0": AgentSpec(1.0),
     "heading": AgentSpec(0.75, "heading"),  # flat ground, a heading command that turns every 100 steps
     # score references only (not in any dataset)
-    # a1-run-v0's: trained on the run task's own reward (the fastest this actuation allows, ~0.85-0.9 m/s,
-    # not 1.25: data card, "How fast can this A1 go?")
+    # a1-run-v0's: trained on the run task's own reward (~0.89 m/s, not 1.25: v0's action range, a third of
+    # the release's, limits the gaits: data card, "How fast does v0's action range let the A1 go?")
     "run-1.25": AgentSpec(1.25, role="reference"),
     "hiking": AgentSpec(0.75, "waypoints", "course", role="reference", band=(-0.1, 0.1), episode_steps=1000),
     # the a1-*-v1 tasks (the release's action range, reward and hiking course): data agents ...
