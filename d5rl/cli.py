@@ -98,6 +98,7 @@ def cmd_generate(args) -> int:
 
 def cmd_verify(args) -> int:
     from d5rl.datasets.verify import regenerate_command, verify_dataset
+    from d5rl.registry import get_spec
 
     report = verify_dataset(args.task, seed=args.seed, progress=True)
     if report.ok:
@@ -106,8 +107,9 @@ def cmd_verify(args) -> int:
     print(f"CORRUPT: {len(report.problems)} problem(s) in {report.root}", file=sys.stderr)
     for p in report.problems:
         print(f"  {p}", file=sys.stderr)
-    print(f"  fix: `{regenerate_command(args.task, args.seed)}` regenerates the missing and damaged shards "
-          "(intact ones are kept)",
+    imported = get_spec(args.task).dataset.imported
+    print(f"  fix: `{regenerate_command(args.task, args.seed)}` "
+          + ("imports the data again" if imported else "regenerates the missing and damaged shards (intact ones are kept)"),
           file=sys.stderr)
     return 1
 

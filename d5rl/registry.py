@@ -72,8 +72,8 @@ class DatasetSpec:
     # data agents are not trained); generating or loading it raises this before any work.
     unavailable: str | None = None
     # An imported dataset (data d5rl cannot make, e.g. human demonstrations): "module:attr" of its
-    # importer, whose ``version`` identifies the conversion and whose ``how`` says, in one line, which
-    # commands download and import it.  Exactly one of ``generator`` and ``importer`` is set.
+    # importer, whose ``version`` identifies the conversion, ``command`` imports it and ``how`` says, in one
+    # line, which commands download and import it.  Exactly one of ``generator`` and ``importer`` is set.
     importer: str | None = None
 
     @property

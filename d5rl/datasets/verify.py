@@ -23,7 +23,13 @@ class VerifyReport:
 
 
 def regenerate_command(task_id: str, seed: int | None = None) -> str:
-    """The command that regenerates what verification finds missing or damaged (intact shards are kept)."""
+    """The command that regenerates what verification finds missing or damaged (intact shards are kept);
+    for an imported dataset, the command that imports it again."""
+    from d5rl.registry import resolve
+
+    dspec = get_spec(task_id).dataset
+    if dspec is not None and dspec.imported:
+        return resolve(dspec.importer).command
     return f"d5rl generate {task_id}" + (f" --seed {seed}" if seed is not None else "")
 
 
@@ -34,7 +40,8 @@ def verify_dataset(task: str | TaskSpec, seed: int | None = None, progress: bool
     problems: list[str] = []
     manifest_path = root / fmt.MANIFEST
     if not manifest_path.exists():
-        hint = "generation did not finish" if (root / "shards").exists() else "it was never generated"
+        hint = ("generation did not finish" if (root / "shards").exists() else
+                "it was never imported" if spec.dataset.imported else "it was never generated")
         return VerifyReport(root, 0, [f"{manifest_path}: missing ({hint}; run `{regenerate_command(spec.id, seed)}`)"])
     try:
         manifest = fmt.read_manifest(manifest_path)

@@ -52,8 +52,9 @@ class KitchenHumanImport:
     """``DatasetSpec.importer`` of the human data: what identifies the conversion, and how to get it."""
 
     version = "kitchen-human-import-1"
+    command = f"d5rl import-kitchen-human {DEFAULT_SOURCE}"
     how = (f"download the human demonstrations with `minari download {DEFAULT_SOURCE}` (pip install minari), "
-           f"then run `d5rl import-kitchen-human {DEFAULT_SOURCE}` (a D4RL kitchen .hdf5 file works too)")
+           f"then run `{command}` (a D4RL kitchen .hdf5 file works too)")
 
 
 @dataclasses.dataclass

@@ -172,6 +172,30 @@ def test_import_a_d4rl_file_then_train_bc_through_d5rl_train(tmp_path, scripted)
     _train_bc(tmp_path)
 
 
+def test_verify_render_and_seeds_on_imported_data(tmp_path, scripted, capsys):
+    from d5rl.datasets.generation import dataset_root
+    from tests.test_bad_input import one_line_error
+
+    assert main(["import-kitchen-human", str(write_d4rl(tmp_path / "k.hdf5", scripted)), "--no-render",
+                 "--no-progress"]) == 0
+    assert main(["verify", TASK]) == 0
+    video = tmp_path / "ep.gif"
+    assert main(["render", "kitchen-standard-mixed-human-v0", "--episode", "1", "--steps", "2", "--out", str(video),
+                 "--no-progress"]) == 0 and video.stat().st_size > 0
+    one_line_error(capsys, ["render", TASK, "--episode", "2", "--out", str(video)], "has no episode 2",
+                   "numbered 0 to 1")
+    with pytest.raises(D5RLError, match="imported and has no seed"):
+        load_dataset(TASK, seed=3)
+    shard = next((dataset_root(d5rl.get_spec(TASK).dataset) / "shards").iterdir())
+    (shard / "actions.npy").write_bytes(b"damaged")
+    capsys.readouterr()
+    assert main(["verify", TASK]) == 1
+    assert "fix: `d5rl import-kitchen-human D4RL/kitchen/mixed-v2` imports the data again" in capsys.readouterr().err
+    with pytest.raises(D5RLError, match="damaged shard") as e:
+        load_dataset(TASK)  # never "regenerated": the hint is the import
+    assert "d5rl import-kitchen-human" in e.value.hint
+
+
 def _train_bc(tmp_path):
     run = tmp_path / "run"
     assert main(["train", "bc", TASK, "--offline-steps", "16", "--run-dir", str(run), "--no-progress",
