@@ -58,7 +58,8 @@ class A1Env(MujocoEnv):
     **Episode end.** Terminates when |roll| or |pitch| > 60° (hiking also when the lateral
     offset exceeds 3 m); truncated after 400 steps (hiking 1000) by the TimeLimit wrapper.
 
-    **Version history.** v0: initial release.
+    **Version history.** v0: initial release.  Superseded by v1 (:class:`d5rl.envs.a1.v1.A1EnvV1`), which
+    takes the D5RL release's action range (3× this one's), reward, start state and hiking course.
     """
 
     metadata = {"render_modes": ["rgb_array"], "render_fps": 20}

@@ -317,3 +317,40 @@ def test_v1_dataset_fails_first_with_one_line_until_its_agents_are_published():
     from d5rl.runner.cli import resolve_tasks
 
     assert "a1-walk-v1" not in resolve_tasks(["a1"]) and resolve_tasks(["a1-walk-v1"]) == ["a1-walk-v1"]
+
+
+@pytest.mark.parametrize("task,agent_env", [("a1-walk-v1", ("run", {"target_speed": 0.5})),
+                                            ("a1-run-v1", ("run", {"target_speed": 1.0})),
+                                            ("a1-hiking-v1", ("run_toward", {}))])
+def test_relabelling_the_data_agents_infos_gives_the_tasks_reward(task, agent_env):
+    """The v1 datasets store the data agents' reward terms; each task recomputes its reward from them."""
+    from d5rl.envs.a1 import data
+
+    spec = d5rl.get_spec(task)
+    relabel = getattr(data, spec.relabel.split(":")[1])
+
+    def roll(env):
+        env.reset(seed=1)
+        rng = np.random.default_rng(1)
+        infos, rewards = {k: [] for k in data.INFO_KEYS}, []
+        for _ in range(40):
+            _, r, term, _, info = env.step(rng.uniform(-0.5, 0.5, 12))
+            rewards.append(r)
+            for k in data.INFO_KEYS:
+                infos[k].append(info[k])
+            if term:
+                break
+        return {f"infos/{k}": np.asarray(v) for k, v in infos.items()}, np.asarray(rewards)
+
+    own, own_rewards = roll(A1EnvV1(**spec.env_kwargs))  # on the task's own env: its rewards exactly
+    np.testing.assert_allclose(relabel(spec, own)["rewards"], own_rewards, rtol=1e-6, atol=1e-4)
+    infos, _ = roll(A1EnvV1(agent_env[0], **agent_env[1]))  # a data agent's env: the task's formula
+    target = spec.env_kwargs["target_speed"]
+    for i, r in enumerate(relabel(spec, infos)["rewards"]):
+        fwd, standing, energy, err = (infos[f"infos/{k}"][i] for k in data.INFO_KEYS)
+        speed = tol(fwd, target - 0.1, target + 0.1, target, "linear", 0.0)
+        if task == "a1-hiking-v1":
+            want = 10 * speed * tol(err, -np.pi / 12, np.pi / 12, np.pi, "linear", 0.0) * standing - 0.001 * energy
+        else:
+            want = 10 * speed * standing - 0.01 * energy
+        assert r == pytest.approx(want, rel=1e-5, abs=1e-4)
