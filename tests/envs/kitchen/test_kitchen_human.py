@@ -5,8 +5,10 @@ Fixture layouts follow the formats' generation code: Minari's ``D4RL/kitchen/*-v
 ``scripts/D4RL/kitchen/create_franka_dataset.py`` (Farama-Foundation/minari-dataset-generation-scripts)
 recording gymnasium-robotics' ``FrankaKitchen-v1`` (``gymnasium_robotics/envs/franka_kitchen/kitchen_env.py``:
 the 59-D ``observation``, ``achieved_goal``/``desired_goal`` per target subtask) with Minari's HDF5 storage
-(``minari/dataset/_storages/hdf5_storage.py``: ``episode_<i>`` groups); D4RL's kitchen files hold 60-D
-observations (30 joint positions, 30-D goal) with ``terminals``/``timeouts``.
+(``minari/dataset/_storages/hdf5_storage.py``: ``episode_<i>`` groups); D4RL's kitchen files come from
+``scripts/generation/generate_kitchen_datasets.py`` (Farama-Foundation/D4RL): 60-D float32 observations
+(30 joint positions, the task's 30-D goal), ``terminals`` (float32) true on each demonstration's last row,
+no ``timeouts``, ``infos`` the demonstration's index.
 """
 
 from __future__ import annotations
@@ -96,7 +98,7 @@ def write_minari(root, episodes, noise=1e-3, dataset_id="D4RL/kitchen/mixed-v2",
 
 
 def write_d4rl(path, episodes):
-    """A D4RL kitchen file: rows of all episodes back to back, the last row of each a timeout."""
+    """A D4RL kitchen file: rows of all episodes back to back, the last row of each a terminal."""
     idx = _indices()
     goal = np.zeros(30)
     for t in FILE_TASKS:
@@ -110,8 +112,8 @@ def write_d4rl(path, episodes):
         f["observations"] = np.concatenate(obs).astype(np.float32)
         f["actions"] = np.concatenate(acts)
         f["rewards"] = np.zeros(len(f["observations"]), np.float32)
-        f["terminals"] = np.zeros(len(f["observations"]), bool)
-        f["timeouts"] = np.concatenate(timeouts)
+        f["terminals"] = np.concatenate(timeouts).astype(np.float32)
+        f["infos"] = np.concatenate([np.full(len(q), i) for i, (q, *_) in enumerate(episodes)])
     return path
 
 
