@@ -103,6 +103,12 @@ def cmd_verify(args) -> int:
     report = verify_dataset(args.task, seed=args.seed, progress=True)
     if report.ok:
         print(f"OK: {report.shards_checked} shards intact in {report.root}")
+        if args.reference:
+            from d5rl.datasets.references import compare_task
+
+            result = compare_task(args.task, seed=args.seed)
+            print(result.message, file=sys.stdout if result.identical else sys.stderr)
+            return 0 if result.identical else 1
         return 0
     print(f"CORRUPT: {len(report.problems)} problem(s) in {report.root}", file=sys.stderr)
     for p in report.problems:
@@ -216,6 +222,9 @@ def build_parser() -> argparse.ArgumentParser:
     q = sub.add_parser("verify", help="re-check every checksum of a generated dataset")
     q.add_argument("task")
     q.add_argument("--seed", type=int)
+    q.add_argument("--reference", action="store_true",
+                   help="also compare the bytes with the committed reference fingerprint (first shard; "
+                        "toy datasets whole): identical, or the first differing array and episode")
     q.set_defaults(func=cmd_verify)
 
     q = sub.add_parser("render", help="write a video of a random rollout or a dataset episode")

@@ -10,6 +10,10 @@ job per shard through :func:`run_jobs`; the backend is chosen by ``workers``:
   so it must be on a filesystem every node sees at the same path; :func:`run_jobs` checks that
   before any work starts on a node and says so if it is not.
 
+``worker_env`` gives the worker processes variables they must start with (read by the dynamic
+loader or when a library loads, e.g. :func:`d5rl.numerics.portable_env`): jobs then always run in
+started processes, even with ``workers=1``, and on Ray in workers started with them.
+
 Jobs report progress with :func:`report` (any picklable payload, e.g. one finished
 episode); the driver receives it through ``on_message`` whatever the backend.
 
@@ -188,6 +192,7 @@ def run_jobs(
     on_message: Callable[[Any], None] | None = None,
     on_result: Callable[[int, Any], None] | None = None,
     shared_dir: str | Path | None = None,
+    worker_env: dict[str, str] | None = None,
 ) -> list:
     """``[fn(*job) for job in jobs]``, in parallel; results in job order.
 
@@ -195,6 +200,7 @@ def run_jobs(
     (in this process when ``workers == 1``).  ``on_result(i, result)`` is called as
     each job finishes, so a caller can record progress that survives a later failure.
     ``shared_dir`` is a directory the jobs write to; on Ray every node must see it.
+    ``worker_env``: variables every worker process starts with; with it no job runs in this process.
     """
     check_workers(workers)
     jobs = list(jobs)
@@ -208,13 +214,13 @@ def run_jobs(
             on_result(i, res)
 
     if isinstance(workers, Ray):
-        _run_ray(fn, jobs, workers.address, initializer, initargs, on_message, settle, shared_dir)
+        _run_ray(fn, jobs, workers.address, initializer, initargs, on_message, settle, shared_dir, worker_env)
         return results
     n = max(1, min(int(workers or os.cpu_count() or 1), len(jobs)))
-    if n == 1:
+    if n == 1 and worker_env is None:
         _run_here(fn, jobs, initializer, initargs, on_message, settle)
     else:
-        _run_pool(fn, jobs, n, initializer, initargs, on_message, settle)
+        _run_pool(fn, jobs, n, initializer, initargs, on_message, settle, worker_env)
     return results
 
 
@@ -263,7 +269,22 @@ def _without_main_script(hide: bool):
         sys.modules["__main__"] = main
 
 
-def _run_pool(fn, jobs, n, initializer, initargs, on_message, settle) -> None:
+@contextlib.contextmanager
+def _environ(extra: dict[str, str] | None):
+    """``os.environ`` with ``extra`` while started processes copy it (restored afterwards)."""
+    saved = {k: os.environ.get(k) for k in extra or {}}
+    os.environ.update(extra or {})
+    try:
+        yield
+    finally:
+        for k, v in saved.items():
+            if v is None:
+                os.environ.pop(k, None)
+            else:
+                os.environ[k] = v
+
+
+def _run_pool(fn, jobs, n, initializer, initargs, on_message, settle, worker_env=None) -> None:
     ctx = mp.get_context("spawn")  # fork is unsafe with JAX / OpenGL state in the parent
     tasks, results = ctx.SimpleQueue(), ctx.Queue()
     for i, job in enumerate(jobs):
@@ -272,7 +293,7 @@ def _run_pool(fn, jobs, n, initializer, initargs, on_message, settle) -> None:
         tasks.put(None)
     procs = [ctx.Process(target=_pool_worker, args=(tasks, results, fn, initializer, initargs, os.getpid()),
                          daemon=True, name=f"d5rl-worker-{k}") for k in range(n)]
-    with _without_main_script(not needs_main(fn, initializer, initargs, jobs)):
+    with _without_main_script(not needs_main(fn, initializer, initargs, jobs)), _environ(worker_env):
         for p in procs:
             p.start()
     remaining = set(range(len(jobs)))
@@ -338,7 +359,7 @@ def connect_ray(address: str | None):
     return ray
 
 
-def _run_ray(fn, jobs, address, initializer, initargs, on_message, settle, shared_dir) -> None:
+def _run_ray(fn, jobs, address, initializer, initargs, on_message, settle, shared_dir, worker_env=None) -> None:
     ray = connect_ray(address)
     from ray.util.queue import Queue
 
@@ -349,7 +370,8 @@ def _run_ray(fn, jobs, address, initializer, initargs, on_message, settle, share
         check.touch()
         check_file = str(check.resolve())
     q = Queue()
-    remote = ray.remote(num_cpus=1, max_retries=0)(_ray_job)
+    options = {"runtime_env": {"env_vars": dict(worker_env)}} if worker_env else {}  # workers started with them
+    remote = ray.remote(num_cpus=1, max_retries=0, **options)(_ray_job)
     refs = {remote.remote(fn, job, initializer, initargs, q, check_file): i for i, job in enumerate(jobs)}
     try:
         while refs:

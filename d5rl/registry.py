@@ -84,6 +84,11 @@ class DatasetSpec:
     def producer(self) -> str:
         """The code that writes this dataset: its generator, or its importer."""
         return self.generator if self.generator is not None else self.importer
+    # "portable": generation workers pin CPU-independent kernels (d5rl.numerics), so the bytes are the
+    # same on every x86-64 machine; "native": each CPU's fastest kernels (bytes may differ across CPUs).
+    # Not part of the dataset's identity: a dataset adopts "portable" at a new version unless its bytes
+    # do not change.
+    numerics: str = "native"
 
 
 @dataclasses.dataclass(frozen=True)

@@ -3,7 +3,8 @@
     python scripts/compare_manifests.py MINE/manifest.json REFERENCE/manifest.json
 
 Prints how many arrays are byte-identical, which shards differ, and each side's package versions
-(docs/guarantees.md, "Determinism, and its limit").
+(docs/guarantees.md, "Determinism, and its limit"). `d5rl verify TASK --reference` compares a dataset with
+the committed reference instead.
 """
 
 from __future__ import annotations

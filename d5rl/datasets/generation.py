@@ -20,7 +20,7 @@ from pathlib import Path
 import numpy as np
 from d5rl.progress import progress_bar
 
-from d5rl import parallel, paths
+from d5rl import numerics, parallel, paths
 from d5rl.datasets import format as fmt
 from d5rl.datasets import lock
 from d5rl.datasets.episode import Episode
@@ -118,6 +118,8 @@ _WORKER: dict = {}
 
 def _init_worker(spec: TaskSpec) -> None:
     _WORKER.clear()
+    numerics.require(dataset_spec(spec).numerics)
+    _WORKER["numerics"] = numerics.current()
     _WORKER["generator"] = make_generator(spec)
 
 
@@ -166,6 +168,7 @@ def _run_shard(root: str, index: int, start: int, stop: int, ident: dict) -> dic
         meta = {
             **ident,
             "episodes": [start, stop],
+            "numerics": _WORKER["numerics"],
             "episode_lengths": [ep.num_transitions for ep in episodes],
             "episode_meta": [ep.meta for ep in episodes],
         }
@@ -331,11 +334,15 @@ def _generate_locked(spec, dspec, seed, num_episodes, root, workers, force, prog
     def on_result(i: int, record: dict) -> None:
         records[pending[i][0]] = record
 
+    if dspec.numerics == "portable" and not numerics.supported():
+        print(f"warning: {dspec.name} is defined with portable numerics, which this platform does not have; "
+              "its bytes may differ from the reference's", file=sys.stderr, flush=True)
     try:
         parallel.run_jobs(
             _run_shard, [(str(shards_dir), index, start, stop, ident) for index, start, stop in pending],
             workers=workers, initializer=_init_worker, initargs=(spec,),
             on_message=on_message, on_result=on_result, shared_dir=shards_dir,
+            worker_env=numerics.worker_env(dspec.numerics),
         )
     finally:
         bar.close()
@@ -358,6 +365,8 @@ def write_manifest(root: Path, dspec: DatasetSpec, ident: dict, records: list[di
         "num_episodes": num_episodes,
         "num_transitions": int(sum(lengths)),
         "episodes_per_shard": dspec.episodes_per_shard,
+        # "portable" only if every shard was written by a portable process (shards of older d5rl: native)
+        "numerics": "portable" if all(r.get("numerics") == "portable" for r in records) else "native",
         "arrays": arrays,
         "shards": [{k: r[k] for k in ("name", "episodes", "arrays")} for r in records],
         "packages": fmt.package_versions(),

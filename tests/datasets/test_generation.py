@@ -48,11 +48,17 @@ def test_ray_backend_writes_the_same_bytes(tmp_path, monkeypatch):
     monkeypatch.setenv("D5RL_HOME", str(tmp_path / "a"))
     a = tree_digest(generate(spec, workers=1, progress=False))
     monkeypatch.setenv("D5RL_HOME", str(tmp_path / "b"))
+    portable = register_toy("ray-portable", num_episodes=2, per_shard=2, numerics="portable")
     try:
         b = tree_digest(generate(spec, workers=Ray("local"), progress=False))
+        # a portable dataset's Ray workers start with the pinned environment (they refuse the work otherwise)
+        root = generate(portable, workers=Ray("local"), progress=False)
     finally:
         ray.shutdown()  # later tests in this worker start their own instance
     assert a == b  # nothing left behind either (the shared-directory check file is removed)
+    from d5rl import numerics
+
+    assert fmt.read_manifest(root / fmt.MANIFEST)["numerics"] == ("portable" if numerics.supported() else "native")
 
 
 def test_run_jobs_reports_progress_and_keeps_job_order():

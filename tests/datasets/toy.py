@@ -59,7 +59,7 @@ def relabel_double(spec, arrays):
     return {"rewards": 2 * np.asarray(arrays["rewards"])}
 
 
-def register_toy(name="toy", num_episodes=20, per_shard=4, relabel=None, **kwargs):
+def register_toy(name="toy", num_episodes=20, per_shard=4, relabel=None, numerics="native", **kwargs):
     spec = TaskSpec(
         id=f"test-{name}-v0",
         entry_point="tests.datasets.toy:ToyEnv",
@@ -72,6 +72,7 @@ def register_toy(name="toy", num_episodes=20, per_shard=4, relabel=None, **kwarg
             num_episodes=num_episodes,
             episodes_per_shard=per_shard,
             generator_kwargs=kwargs,
+            numerics=numerics,
         ),
         relabel=relabel,
     )

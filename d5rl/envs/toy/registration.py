@@ -23,6 +23,7 @@ for suffix, pixels in (("", False), ("-pixels", True)):
             num_episodes=200,
             episodes_per_shard=50,
             generator_kwargs={"pixels": pixels},
+            numerics="portable",  # the same bytes as with native numerics on the machine class measured
             description="200 episodes acting like the expert (noise 0.3) w.p. 0.3 per step, else randomly",
         ),
         score=SCORE,
