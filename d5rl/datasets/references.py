@@ -150,15 +150,17 @@ def compare_task(task, seed: int | None = None, references: dict | None = None) 
 
 
 def dataset_tasks() -> dict[str, str]:
-    """Every dataset of d5rl's task families, with the first task (by id) that uses it (tasks registered
-    from outside d5rl, e.g. by tests, have no reference)."""
+    """Every dataset of d5rl's task families that d5rl can generate now, with the first task (by id) that
+    uses it. Without a reference: imported datasets (their bytes are a download's), datasets marked
+    unavailable (e.g. their data agents are not trained yet) and tasks registered from outside d5rl."""
     from d5rl.registry import get_spec, list_tasks
 
     out = {}
     for task in list_tasks():
         spec = get_spec(task)
         d = spec.dataset
-        if d is not None and d.name not in out and spec.entry_point.startswith("d5rl."):
+        if d is not None and d.name not in out and spec.entry_point.startswith("d5rl.") \
+                and not d.imported and d.unavailable is None:
             out[d.name] = task
     return out
 
