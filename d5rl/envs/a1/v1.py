@@ -25,6 +25,10 @@ GOAL_RANGE = 10.0  # m: RunToward's goals are uniform in [-GOAL_RANGE, GOAL_RANG
 FRICTION_RANGE = (0.75, 1.25)  # RunToward: the floor's sliding friction per episode
 TRUNK_MASS, TRUNK_MASS_SPREAD = 4.714, 0.25  # kg, RunToward: the trunk's mass per episode
 MAX_LATERAL_OFFSET = 3.0  # m, hiking: |y| beyond this ends the episode
+# The release's arenas are dm_control composer arenas, whose base model sets 5 no-slip solver iterations
+# (tolerance 0) on top of the A1's elliptic cones and impratio 100: feet slip less.  It doubles the cost
+# of a physics step (~2 -> ~4 ms of one core per control step), a small part of an agent's training step.
+NOSLIP_ITERATIONS, NOSLIP_TOLERANCE = 5, 0.0
 
 
 def euler_xyz(quat) -> tuple[float, float, float]:
@@ -208,7 +212,8 @@ class A1EnvV1(MujocoEnv):
     **Description.** The MuJoCo Menagerie A1 (the release's model) under 20 Hz PD position control
     (kp 60, kd 6, 1 ms physics): every physics step applies the torque kp·(target − q) − kd·q̇
     clipped to ±33.5 N·m, as the release's ``A1.apply_action`` does (MuJoCo's position actuator
-    with ``kv`` and ``forcerange``).  ``task="run"`` tracks ``target_speed`` on flat ground
+    with ``kv`` and ``forcerange``); contacts as in the release's dm_control arenas (elliptic cones,
+    impratio 100, 5 no-slip iterations).  ``task="run"`` tracks ``target_speed`` on flat ground
     (``a1-walk-v1`` 0.75 m/s, ``a1-run-v1`` 1.25 m/s); ``"hiking"`` walks at 1 m/s through four
     waypoints over a course redrawn every episode (a bumpy ring-shaped rim, two 1.2 m ridges:
     :mod:`d5rl.envs.a1.arenas`; ``a1-hiking-v1``); ``"run_toward"`` runs at 1 m/s toward random goals
@@ -241,7 +246,7 @@ class A1EnvV1(MujocoEnv):
     after 400 steps (hiking 1000) by the TimeLimit wrapper.
 
     **Version history.** v1: the release's action range (3× v0's), reward (product of gaussian joint
-    terms, signed energy, 'XYZ' angles), start state and hiking task (1 m/s, course redrawn per
+    terms, signed energy, 'XYZ' angles), no-slip contact iterations, start state and hiking task (1 m/s, course redrawn per
     episode, waypoints reached within 0.1 m).  v0 (:class:`d5rl.envs.a1.task.A1Env`): ±1× range,
     mean of quadratic joint terms, |energy|, one fixed course at 0.75 m/s.
     """
@@ -254,6 +259,8 @@ class A1EnvV1(MujocoEnv):
             raise ValueError(f"task must be one of {sorted(TASKS)}, got {task!r}")
         self.task = TASKS[task](target_speed, **task_kwargs)
         spec = build_spec()
+        spec.option.noslip_iterations = NOSLIP_ITERATIONS
+        spec.option.noslip_tolerance = NOSLIP_TOLERANCE
         arenas.add_floor(spec, self.task.floor)
         super().__init__(spec.compile(), frame_skip=round(CONTROL_DT / PHYSICS_DT), render_mode=render_mode,
                          render_size=render_size, render_camera="track")

@@ -161,6 +161,14 @@ def test_torque_is_the_clipped_pd_law(walk):
     np.testing.assert_allclose(walk.data.actuator_force, np.clip(raw, -33.5, 33.5), rtol=1e-9, atol=1e-9)
 
 
+def test_physics_options_are_the_release_arenas(walk):
+    # dm_control's composer arena: noslip_iterations 5, tolerance 0; the A1 model: elliptic cones, impratio 100
+    opt = walk.model.opt
+    assert (opt.noslip_iterations, opt.noslip_tolerance, opt.impratio) == (5, 0.0, 100.0)
+    assert opt.cone == mujoco.mjtCone.mjCONE_ELLIPTIC and opt.timestep == 0.001
+    assert opt.integrator == mujoco.mjtIntegrator.mjINT_EULER  # the kd term acts explicitly, as the release's PD
+
+
 def test_start_is_the_lowest_free_height_on_the_release_grid(walk):
     walk.reset(seed=0)
     z = walk.data.qpos[2]
