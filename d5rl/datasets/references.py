@@ -126,7 +126,8 @@ def compare(root: Path, ref: dict) -> Comparison:
                                              f"(in {shard['name']}) ({where})")
     more = (f"; the reference covers {ref['num_episodes']}: generate them to compare all"
             if n < ref["num_episodes"] else "")
-    return Comparison(True, f"identical to the reference: the first {n} episodes of {name}, "
+    first = "the first episode" if n == 1 else f"the first {n} episodes"
+    return Comparison(True, f"identical to the reference: {first} of {name}, "
                             f"{len(ref['episodes'])} arrays{more} ({where})")
 
 

@@ -3,6 +3,7 @@ reproduced by a prefix regenerated under a restricted instruction set."""
 
 import json
 import os
+import shutil
 import subprocess
 import sys
 from pathlib import Path
@@ -122,6 +123,22 @@ def test_portable_datasets_regenerate_their_reference_under_a_restricted_instruc
     result = references.compare(root, REFS[name])
     assert result.identical, result.message
     assert "the first 4 episodes" in result.message
+
+
+QEMU = shutil.which("qemu-x86_64")
+
+
+@pytest.mark.slow
+@pytest.mark.skipif(not numerics.supported() or QEMU is None,
+                    reason="user-mode QEMU (`apt install qemu-user`) emulates the other CPUs")
+@pytest.mark.parametrize("cpu", ["SandyBridge", "Haswell"])  # AVX without FMA; AVX2 and FMA; both without AVX-512
+@pytest.mark.parametrize("name", PORTABLE)
+def test_portable_datasets_regenerate_their_reference_on_other_cpus(name, cpu, tmp_path):
+    env = {**os.environ, "D5RL_HOME": str(tmp_path), "PYTHONPATH": str(REPO)}
+    env.update(numerics.portable_env(env))
+    root = regenerate(references.dataset_tasks()[name], 1, env, prefix=(QEMU, "-cpu", cpu))
+    result = references.compare(root, REFS[name])
+    assert result.identical and "the first episode of" in result.message, result.message
 
 
 def cpu_has_fma() -> bool:
