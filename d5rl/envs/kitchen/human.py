@@ -19,7 +19,9 @@ SOURCE`` reads both:
 Every step's simulator state is restored from the joint positions (and velocities where stored; the
 target subtasks' object positions from the noise-free ``achieved_goal``), and the replay is checked:
 the subtasks the file says are done (its own goal test on its own values) must be done in our scene,
-step by step; mismatches are reported per episode and kept in the manifest (``replay_check``).  The
+step by step; mismatches are reported per episode and kept in the manifest (``replay_check``).  Every
+tenth transition is also stepped in our env from its stored state with its stored action, and the
+distance to the next stored arm position reported: whether the actions mean the same here.  The
 result is a regular d5rl dataset (``kitchen-standard-human``: manifest, checksummed shards, states,
 ``infos/completed``, render cache built from the states) that every standard-kitchen task reads as its
 ``human`` variant, relabelling rewards for its own four subtasks::
@@ -250,6 +252,22 @@ def replay_check(index: int, claimed: dict[str, np.ndarray], ours: np.ndarray) -
     return {"episode": index, "file_done": file_done, "scene_done": our_done, "steps_differ": steps}
 
 
+ACTION_CHECK_STRIDE = 10  # every 10th transition: ~1/10 of an env step per transition on import
+
+
+def action_errors(env, states: np.ndarray, qpos: np.ndarray, actions: np.ndarray,
+                  stride: int = ACTION_CHECK_STRIDE) -> np.ndarray:
+    """How far one step of our env, from a stored state with the stored action, lands from the next stored
+    arm position (rad, the largest of the 7 arm joints), for every ``stride``-th transition: whether the
+    file's actions move our robot as they moved the demonstrator's (what a policy learnt from them needs)."""
+    out = []
+    for t in range(0, len(actions), stride):
+        env.set_state(states[t])
+        env.step(actions[t])
+        out.append(np.abs(env.data.qpos[:7] - qpos[t + 1, :7]).max())
+    return np.asarray(out)
+
+
 def completion_order(completed: np.ndarray) -> list[str]:
     """Subtasks in the order they first reach their goal in an episode (``infos/completed`` rows)."""
     from d5rl.envs.kitchen.subtasks import SUBTASK_NAMES
@@ -269,6 +287,7 @@ def import_human(source: str | Path, *, render: bool = True, cameras=("overview"
     from d5rl.envs.kitchen.data import renders
     from d5rl.envs.kitchen.registration import HUMAN_DATASET
     from d5rl.envs.kitchen.subtasks import MIXED, SUBTASK_NAMES, SUBTASKS, CompletionChecker
+    from d5rl.envs.kitchen.task import KitchenEnv
     from d5rl.progress import progress_bar
 
     renders(None, None, None, episodes=0, cameras=cameras, size=size, check=True)  # before reading the file
@@ -283,6 +302,9 @@ def import_human(source: str | Path, *, render: bool = True, cameras=("overview"
     ident = generation._identity(dspec, dspec.default_seed, KitchenHumanImport.version)
     checker = CompletionChecker(model)
     mixed = [SUBTASK_NAMES.index(t) for t in MIXED]
+    env = KitchenEnv(obs_mode="state")
+    env.reset(seed=0)
+    errors = []
     fmt.ensure_writable(root)
     with lock.writing(root, "import"):
         with lock.publishing(root):  # an import replaces whatever was imported before
@@ -303,9 +325,12 @@ def import_human(source: str | Path, *, render: bool = True, cameras=("overview"
                 if problem is not None:
                     mismatches.append(problem)
                 order = completion_order(done)
+                states = restore_states(model, ep.qpos, ep.qvel)
+                err = action_errors(env, states, ep.qpos, ep.actions)
+                errors.append(err)
                 arrays = {
                     "observations/proprio": ep.qpos[:, :9].astype(np.float32),
-                    "states": restore_states(model, ep.qpos, ep.qvel),
+                    "states": states,
                     "actions": ep.actions,
                     "rewards": done[:, mixed].sum(axis=1).astype(np.float32),  # relabelled per task on load
                     "terminals": np.zeros(t, bool),
@@ -315,7 +340,8 @@ def import_human(source: str | Path, *, render: bool = True, cameras=("overview"
                 for k, v in arrays.items():
                     parts.setdefault(k, []).append(v)
                 lengths.append(t)
-                metas.append({**ep.meta, "subtasks": order, "solved": order, "num_solved": len(order)})
+                metas.append({**ep.meta, "subtasks": order, "solved": order, "num_solved": len(order),
+                              "action_error_median": round(float(np.median(err)), 5)})
                 bar.update(1)
             writer = fmt.ShardWriter(root / "shards", s)
             for k, v in parts.items():
@@ -326,8 +352,13 @@ def import_human(source: str | Path, *, render: bool = True, cameras=("overview"
         bar.close()
         source_info = {"layout": kind, "id": _source_id(kind, path), "file": path.name,
                        "sha256": fmt.sha256_file(path), "velocities": kind == "minari"}
+        err = np.concatenate(errors)
+        moves = np.concatenate([np.abs(np.diff(e.qpos[:, :7], axis=0)).max(axis=1) for e in episodes])
+        actions_check = {"stride": ACTION_CHECK_STRIDE, "transitions": len(err),
+                         "median_rad": float(np.median(err)), "p90_rad": float(np.quantile(err, 0.9)),
+                         "median_step_rad": float(np.median(moves))}
         check = {"episodes_checked": len(episodes), "episodes_mismatched": len(mismatches),
-                 "mismatches": mismatches}
+                 "mismatches": mismatches, "actions": actions_check}
         generation.write_manifest(root, dspec, ident, records, len(episodes),
                                   extra={"source": source_info, "replay_check": check})
     out(f"imported {len(episodes)} episodes ({sum(len(e.actions) for e in episodes)} transitions) from "
@@ -339,6 +370,10 @@ def import_human(source: str | Path, *, render: bool = True, cameras=("overview"
             f"steps that differ: {m['steps_differ']}")
     if len(mismatches) > 20:
         out(f"  ... {len(mismatches) - 20} more in {root / fmt.MANIFEST} (replay_check)")
+    out(f"action check: one step of our env from a stored state with the stored action ends "
+        f"{actions_check['median_rad']:.4f} rad (median; 90%: {actions_check['p90_rad']:.4f}) from the next stored "
+        f"arm position (the arm moves {actions_check['median_step_rad']:.4f} rad a step, median), "
+        f"over every {ACTION_CHECK_STRIDE}th transition")
     if render:  # the camera tasks' frames, from the states (a regular derived cache)
         load_dataset("kitchen-standard-mixed-human-v0", cameras=tuple(cameras), size=size, workers=workers,
                      progress=progress, in_memory=False)

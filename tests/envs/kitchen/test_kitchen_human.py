@@ -134,7 +134,7 @@ def test_import_a_minari_dataset_found_through_minari_datasets_path(tmp_path, mo
     monkeypatch.setenv("MINARI_DATASETS_PATH", str(tmp_path / "minari"))
     assert main(["import-kitchen-human", "D4RL/kitchen/mixed-v2", "--no-render", "--no-progress"]) == 0
     out = capsys.readouterr().out
-    assert "replay check: 2 of 2 episodes agree" in out
+    assert "replay check: 2 of 2 episodes agree" in out and "action check: one step of our env" in out
     ds = load_dataset(TASK, progress=False)
     assert ds.num_episodes == 2 and list(ds.episode_lengths) == [len(a) for _, _, a, _ in scripted]
     states = np.asarray(ds.arrays["states"])
@@ -213,6 +213,22 @@ def test_train_bc_on_an_imported_minari_dataset(tmp_path, monkeypatch, scripted)
     root = write_minari(tmp_path / "minari", scripted)
     assert main(["import-kitchen-human", str(root), "--no-render", "--no-progress"]) == 0
     _train_bc(tmp_path)
+
+
+@pytest.mark.parametrize("sign", [1, -1])
+def test_action_check_measures_whether_the_actions_move_our_robot(tmp_path, scripted, sign):
+    """Noise-free positions and velocities with the scripted actions: one env step from each stored state lands
+    on the next one; with the actions negated it misses by about two steps' motion."""
+    flipped = [(q, v, sign * a, c) for q, v, a, c in scripted]
+    assert main(["import-kitchen-human", str(write_minari(tmp_path / "m", flipped, noise=0.0)), "--no-render",
+                 "--no-progress"]) == 0
+    manifest = json.loads((tmp_path / "d5rl-home/datasets/kitchen-standard-human/v1-seed0/manifest.json").read_text())
+    check = manifest["replay_check"]["actions"]
+    assert check["transitions"] == sum(len(range(0, len(a), 10)) for _, _, a, _ in scripted)
+    if sign == 1:
+        assert check["median_rad"] < 1e-6
+    else:
+        assert check["median_rad"] > check["median_step_rad"]
 
 
 def test_replay_mismatches_are_reported_per_episode(tmp_path, scripted, capsys):
