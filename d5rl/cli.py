@@ -40,7 +40,8 @@ def cmd_info(args) -> int:
     s = get_spec(args.task)
     print(f"{s.id}\n  {s.description}")
     env = make_env(s.id)
-    print(f"  horizon:      {s.max_episode_steps} steps of {env.unwrapped.dt:.3f} s")
+    dt = getattr(env.unwrapped, "dt", None)  # the toy task has no simulator time step
+    print(f"  horizon:      {s.max_episode_steps} steps" + (f" of {dt:.3f} s" if dt else ""))
     print(f"  observation:  {env.observation_space}")
     print(f"  action:       {env.action_space}")
     env.close()
@@ -58,6 +59,9 @@ def cmd_info(args) -> int:
     print(f"  dataset:      {d.name} v{d.version}, {full_size(d)} episodes, {'importer' if d.imported else 'generator'} {d.producer}")
     if d.description:
         print(f"                {d.description}")
+    if not d.imported:
+        print("  numerics:     " + ("portable: the same bytes on every x86-64 CPU" if d.numerics == "portable" else
+                                  "native: the bytes may differ across CPUs (docs/guarantees.md, Determinism)"))
     root = dataset_root(d)
     print(f"  location:     {root}  [{status}]")
     if manifest is not None:

@@ -131,3 +131,11 @@ def test_info_of_a_subtask_scored_task_does_not_ask_for_reference_returns(capsys
     assert main(["info", "wx-sorting-state-v0"]) == 0
     out = capsys.readouterr().out
     assert "fraction" in out and "reference returns" not in out
+
+
+def test_info_says_which_numerics_a_dataset_has(capsys):
+    assert main(["info", "toy-reach-v0"]) == 0  # a task without a simulator time step
+    out = capsys.readouterr().out
+    assert "horizon:      25 steps\n" in out and "numerics:     portable: the same bytes on every x86-64 CPU" in out
+    assert main(["info", "wx-sorting-state-v0"]) == 0
+    assert "numerics:     native: the bytes may differ across CPUs" in capsys.readouterr().out
