@@ -1,10 +1,13 @@
-"""Behaviour cloning: maximise the log-likelihood of the dataset's actions.
+"""Behaviour cloning, as the D5RL release ran it: a Gaussian policy with a tanh-bounded mean and a fixed
+unit std, so maximising the likelihood of the dataset's actions is least squares on the mean
+(``-log N(a; μ, I) = ½‖a − μ‖² + const``).  The learning rate decays along a cosine (the release's kitchen and
+A1 configs; its WidowX script keeps it constant: ``actor_decay_steps=0`` in the settings file), and the policy
+MLP may use dropout (the release's A1 config: 0.1).
 
-The policy is a Gaussian whose mean is tanh-bounded (not a squashed Gaussian),
-so actions at the ±1 bounds have finite likelihood.  Evaluation takes the mean.
+``learned_std=True`` keeps the variant that also learns the std by likelihood (a state-dependent one, or one
+vector with ``state_dependent_std=False``).  Evaluation takes the mean.
 
-Metrics: ``actor/loss`` (negative log-likelihood), ``actor/mse`` (mean vs. data
-action), ``actor/log_std``.
+Metrics: ``actor/loss`` (negative log-likelihood), ``actor/mse`` (mean vs. data action), ``actor/log_std``.
 """
 
 from __future__ import annotations
@@ -12,12 +15,14 @@ from __future__ import annotations
 from typing import Any
 
 import jax
+import optax
 
 from d5rl.agents.augment import augment_batch
-from d5rl.agents.common import ENCODER_DEFAULTS, Agent, make_train_state, nonpytree_field, obs_ndims, prepare_example
+from d5rl.agents.common import (ENCODER_DEFAULTS, Agent, make_train_state, nonpytree_field, obs_ndims, prepare_example,
+                                release_actor_decay)
 from d5rl.agents.config import Config
-from d5rl.agents.networks import GaussianPolicy
 from d5rl.agents.encoders import make_encoder
+from d5rl.agents.networks import GaussianPolicy
 
 
 class BCAgent(Agent):
@@ -25,6 +30,9 @@ class BCAgent(Agent):
     actor: Any
     config: Config = nonpytree_field()
     obs_ndim: tuple = nonpytree_field()
+
+    version = 2  # 2: the release's fixed unit-std policy, cosine lr decay and dropout (1: learned std, constant lr)
+    resolve_config = classmethod(release_actor_decay)  # actor_decay_steps=None: the release's decay horizon
 
     def actor_loss(self, actor_params, batch, key):
         dist = self.actor.apply_fn({"params": actor_params}, self.normalize(batch["observations"]), train=True,
@@ -46,19 +54,27 @@ class BCAgent(Agent):
         rng, k_actor = jax.random.split(jax.random.PRNGKey(seed))
         actor_def = GaussianPolicy(make_encoder(config), config.hidden_dims, ex_act.shape[-1], tanh_squash=False,
                                    log_std_min=config.log_std_min, log_std_max=config.log_std_max,
-                                   state_dependent_std=config.state_dependent_std)
-        actor = make_train_state(actor_def, k_actor, (ex_obs,), config.actor_lr)
+                                   state_dependent_std=config.state_dependent_std, fixed_std=not config.learned_std,
+                                   dropout_rate=config.dropout_rate or None)
+        lr = config.actor_lr
+        if config.actor_decay_steps:
+            lr = optax.cosine_decay_schedule(config.actor_lr, config.actor_decay_steps)
+        actor = make_train_state(actor_def, k_actor, (ex_obs,), lr)
         return cls(rng=rng, actor=actor, config=config, obs_ndim=obs_ndims(ex_obs))
 
 
 def get_config() -> Config:
     return Config(
         agent_name="bc",  # name in d5rl.agents.AGENTS
-        actor_lr=3e-4,  # Adam learning rate (state tasks; D5RL uses 1e-4 for pixel policies)
+        actor_lr=3e-4,  # Adam learning rate (release kitchen BC; A1 1e-3 and WidowX 1e-4 in the settings file)
+        actor_decay_steps=None,  # cosine decay of the lr to 0 over this many updates; None = the release's
+        # horizon (release_actor_decay); 0 = constant (the release's WidowX BC)
         hidden_dims=(256, 256),  # MLP widths of the policy
-        log_std_min=-5.0,  # clip of the policy's log-std
-        log_std_max=2.0,  # upper clip of the policy's log-std
-        state_dependent_std=True,  # log-std from the network (False = one learned vector)
+        dropout_rate=0.0,  # dropout in the policy MLP while training (release A1 config: 0.1)
+        learned_std=False,  # False: the release's fixed unit std (least squares); True: learn the std by likelihood
+        log_std_min=-5.0,  # with learned_std: clip of the policy's log-std
+        log_std_max=2.0,  # with learned_std: upper clip of the policy's log-std
+        state_dependent_std=True,  # with learned_std: log-std from the network (False = one learned vector)
         normalize_observations=False,  # standardise state observations with the dataset's mean and std
         obs_mean=None,  # per-dimension mean, filled by `d5rl train` when normalizing (None: identity)
         obs_std=None,  # per-dimension std + 1e-3, filled with obs_mean

@@ -70,6 +70,9 @@ class Agent(flax.struct.PyTreeNode):
     hooks the training loop calls, never as name checks in the loop.
     """
 
+    # Version of the agent's algorithm: bumped whenever a change to its code changes what a run computes, so
+    # results trained with the older code are listed as stale (d5rl.runner.grid.stale_reason) and rerun.
+    version = 1
     # Whether an offline-to-online run first trains this agent offline (False: RLPD, whose online
     # batches are half offline data, starts its online phase from scratch and takes no offline steps).
     offline_pretraining = True
@@ -206,6 +209,16 @@ def auto_actor_decay(cls, config: Config, *, offline_steps: int, online_steps: i
     IDQL's reference implementations) and stay constant when the run fine-tunes online."""
     if config.actor_decay_steps is None:
         return config.replace(actor_decay_steps=int(offline_steps) if online_steps == 0 else 0)
+    return config
+
+
+def release_actor_decay(cls, config: Config, *, offline_steps: int, online_steps: int) -> Config:
+    """A :meth:`Agent.resolve_config`: ``actor_decay_steps=None`` ("auto") makes the policy lr decay along a
+    cosine over the release's horizon, its offline plus online updates.  The release's kitchen and A1 scripts
+    set ``decay_steps = max_gradient_steps + max_online_gradient_steps`` (500k + 500k) also when they train
+    offline only, so an offline-only run of N updates decays over 2N and ends at half its initial lr."""
+    if config.actor_decay_steps is None:
+        return config.replace(actor_decay_steps=int(offline_steps) + int(online_steps or offline_steps))
     return config
 
 

@@ -198,7 +198,8 @@ AGENT_BOUNDS = {
     "expectile": Bound(float, gt=0, lt=1), "offline_ratio": Bound(float, ge=0, le=1),
     "start_steps": Bound(int, ge=0), "actor_decay_steps": Bound(int, ge=0, optional=True),
     "diffusion_steps": Bound(int, ge=1), "num_samples": Bound(int, ge=1), "cql_n_actions": Bound(int, ge=1),
-    "policy_freq": Bound(int, ge=1),
+    "policy_freq": Bound(int, ge=1), "dropout_rate": Bound(float, ge=0, lt=1),
+    "actor_steps": Bound(int, ge=1),
 }
 
 

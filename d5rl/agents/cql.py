@@ -2,7 +2,9 @@
 
 The critic's TD loss gets a regulariser α · (logsumexp_a Q(s, a) − Q(s, a_data)),
 the log-sum-exp estimated by importance sampling over uniform random actions
-and policy actions at s and s' (``cql_n_actions`` of each).  Actor and
+and policy actions at s (``cql_n_actions`` of each; the D5RL release's ``critic_updater.py``: 4, its
+``max_q_backup`` TD target takes the best of as many actions of π(s')).  ``cql_next_actions`` adds the
+CQL paper's actions of π(s').  Actor and
 temperature are SAC's.  Cal-QL (:mod:`d5rl.agents.calql`) overrides
 :meth:`CQLAgent.bound_policy_q`.
 
@@ -35,6 +37,8 @@ class CQLAgent(Agent):
     config: Config = nonpytree_field()
     obs_ndim: tuple = nonpytree_field()
 
+    version = 2  # 2: the release's form, 4 actions of π(s) and uniform, max-Q backup (1: 10 of π(s), π(s'), uniform)
+
     def bound_policy_q(self, q, batch):
         """Hook on Q of policy actions inside the CQL term, ``(num_qs, n, B)``; CQL leaves it alone."""
         return q, {}
@@ -51,11 +55,20 @@ class CQLAgent(Agent):
         k_next, k_rand, k_cur, k_nxt = jax.random.split(key, 4)
         apply_actor = lambda obs: self.actor.apply_fn({"params": self.actor.params}, obs)  # noqa: E731
         dist_next = apply_actor(batch["next_observations"])
+        n, (b, a_dim) = cfg.cql_n_actions, batch["actions"].shape
         # --- TD target ---
-        next_a, next_logp = dist_next.sample_and_log_prob(k_next)
-        target_q = self.critic.apply_fn({"params": self.target_critic_params}, batch["next_observations"],
-                                        next_a).min(0)
         temperature = self.temp.apply_fn({"params": self.temp.params})
+        if cfg.cql_max_target_backup:  # n actions from π(s'), the best one's value (release: max_q_backup)
+            next_a, next_logp = dist_next.sample_n_and_log_prob(k_next, n)
+            next_q = self._policy_q(self.target_critic_params, self.critic.apply_fn(
+                {"params": self.target_critic_params}, batch["next_observations"], method="encode"), next_a).min(0)
+            best = jnp.argmax(next_q, axis=0)
+            target_q = jnp.take_along_axis(next_q, best[None], 0)[0]
+            next_logp = jnp.take_along_axis(next_logp, best[None], 0)[0]
+        else:
+            next_a, next_logp = dist_next.sample_and_log_prob(k_next)
+            target_q = self.critic.apply_fn({"params": self.target_critic_params}, batch["next_observations"],
+                                            next_a).min(0)
         if cfg.backup_entropy:
             target_q = target_q - temperature * next_logp
         target = jax.lax.stop_gradient(batch["rewards"] + cfg.discount * batch["masks"] * target_q)
@@ -63,18 +76,21 @@ class CQLAgent(Agent):
         qs = self.critic.apply_fn({"params": critic_params}, features, batch["actions"], method="head")
         td_loss = ((qs - target[None]) ** 2).mean(axis=1).sum()
         # --- conservative term ---
-        n, (b, a_dim) = cfg.cql_n_actions, batch["actions"].shape
         rand_a = jax.random.uniform(k_rand, (n, b, a_dim), minval=-1.0, maxval=1.0)
-        cur_a, cur_logp = apply_actor(batch["observations"]).sample_n_and_log_prob(k_cur, n)
-        nxt_a, nxt_logp = dist_next.sample_n_and_log_prob(k_nxt, n)
-        cur_a, cur_logp, nxt_a, nxt_logp = jax.lax.stop_gradient((cur_a, cur_logp, nxt_a, nxt_logp))
+        cur_a, cur_logp = jax.lax.stop_gradient(apply_actor(batch["observations"]).sample_n_and_log_prob(k_cur, n))
         q_rand = self._policy_q(critic_params, features, rand_a)
         q_cur, bound_info = self.bound_policy_q(self._policy_q(critic_params, features, cur_a), batch)
-        q_nxt, _ = self.bound_policy_q(self._policy_q(critic_params, features, nxt_a), batch)
-        if cfg.cql_importance_sample:
-            cat = jnp.concatenate([q_rand - a_dim * math.log(0.5), q_nxt - nxt_logp[None], q_cur - cur_logp[None]], 1)
+        if cfg.cql_next_actions:  # the CQL paper's third set: actions of π(s') valued at s
+            nxt_a, nxt_logp = jax.lax.stop_gradient(dist_next.sample_n_and_log_prob(k_nxt, n))
+            q_nxt, _ = self.bound_policy_q(self._policy_q(critic_params, features, nxt_a), batch)
+            policy_parts = [q_nxt - nxt_logp[None], q_cur - cur_logp[None]] if cfg.cql_importance_sample \
+                else [q_nxt, q_cur]
         else:
-            cat = jnp.concatenate([q_rand, q_nxt, q_cur, qs[:, None]], axis=1)
+            policy_parts = [q_cur - cur_logp[None]] if cfg.cql_importance_sample else [q_cur]
+        if cfg.cql_importance_sample:
+            cat = jnp.concatenate([q_rand - a_dim * math.log(0.5), *policy_parts], 1)
+        else:
+            cat = jnp.concatenate([q_rand, *policy_parts, qs[:, None]], axis=1)
         ood = jax.nn.logsumexp(cat / cfg.cql_temp, axis=1) * cfg.cql_temp  # (num_qs, B)
         cql_diff = jnp.clip(ood - qs, cfg.cql_clip_diff_min, cfg.cql_clip_diff_max).mean(axis=1)
         cql_loss = cfg.cql_alpha * cql_diff.sum()
@@ -137,7 +153,9 @@ def get_config() -> Config:
         num_qs=2,  # clipped double Q
         critic_layer_norm=False,  # LayerNorm in the critics
         cql_alpha=5.0,  # weight α of the conservative term (D5RL sweeps 0.1, 1, 5, 10)
-        cql_n_actions=10,  # sampled actions per kind (random, π(s), π(s')) for the log-sum-exp
+        cql_n_actions=4,  # sampled actions per kind for the log-sum-exp (release critic_updater: NUM_CQL_REPEAT 4)
+        cql_next_actions=False,  # also π(s') actions in the log-sum-exp (CQL paper); the release: π(s) and uniform
+        cql_max_target_backup=True,  # TD target: max over cql_n_actions actions of π(s') (release max_q_backup)
         cql_temp=1.0,  # temperature of the log-sum-exp
         cql_importance_sample=True,  # CQL(H) with importance weights (CQL paper, App. F)
         cql_clip_diff_min=-1e9,  # clip of logsumexp − Q_data (JaxCQL; ±inf = no clip)

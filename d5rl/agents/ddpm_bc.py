@@ -18,7 +18,8 @@ import jax.numpy as jnp
 import optax
 
 from d5rl.agents.augment import augment_batch
-from d5rl.agents.common import Agent, ENCODER_DEFAULTS, auto_actor_decay, copy_tree, make_train_state, nonpytree_field, obs_ndims, prepare_example
+from d5rl.agents.common import (Agent, ENCODER_DEFAULTS, copy_tree, make_train_state, nonpytree_field, obs_ndims,
+                                prepare_example, release_actor_decay)
 from d5rl.agents.config import Config
 from d5rl.agents.networks import soft_update
 from d5rl.agents.encoders import make_encoder
@@ -80,8 +81,9 @@ def make_diffusion_actor(config: Config, key, ex_obs, ex_act):
 def diffusion_config() -> dict:
     """Defaults shared by DDPM+BC and IDQL's actor."""
     return dict(
-        actor_lr=3e-4,  # Adam lr of the noise model (IDQL)
-        actor_decay_steps=None,  # cosine-decay the lr to 0 over this many updates (IDQL: total steps); None = constant
+        actor_lr=3e-4,  # Adam lr of the noise model (IDQL; the release's kitchen, A1 and WidowX configs)
+        actor_decay_steps=None,  # cosine-decay the lr to 0 over this many updates; None = the release's horizon
+        # (release_actor_decay: offline + online updates, 500k + 500k in its scripts); 0 = constant
         diffusion_steps=20,  # T (D5RL: cosine schedule with T = 20)
         num_blocks=3,  # LN-ResNet residual blocks (IDQL)
         hidden_dim=256,  # LN-ResNet width (IDQL)
@@ -93,11 +95,11 @@ def diffusion_config() -> dict:
 
 
 class DiffusionPolicy:
-    """The diffusion actor's part of DDPM+BC and IDQL: its denoising loss, its lr schedule (IDQL decays
-    it over an offline-only run), and acting through ``_act(obs, seed, temperature)`` (sampling and
-    evaluation both draw from the policy; evaluation at temperature 1)."""
+    """The diffusion actor's part of DDPM+BC and IDQL: its denoising loss, its lr schedule (a cosine over the
+    release's horizon), and acting through ``_act(obs, seed, temperature)`` (sampling and evaluation both
+    draw from the policy; evaluation at temperature 1)."""
 
-    resolve_config = classmethod(auto_actor_decay)  # actor_decay_steps=None: decay over an offline-only run
+    resolve_config = classmethod(release_actor_decay)  # actor_decay_steps=None: the release's decay horizon
 
     def actor_loss(self, actor_params, batch, key):
         loss = diffusion_loss(self.actor.apply_fn, actor_params, batch["observations"], batch["actions"], key,
@@ -119,6 +121,8 @@ class DDPMBCAgent(DiffusionPolicy, Agent):
     target_actor_params: Any
     config: Config = nonpytree_field()
     obs_ndim: tuple = nonpytree_field()
+
+    version = 2  # 2: lr decay over the release's horizon (1: over an offline-only run, constant when fine-tuning)
 
     def _update(self, batch):
         rng, aug_key, key = jax.random.split(self.rng, 3)

@@ -166,7 +166,8 @@ class Gaussian:
 
 
 class GaussianPolicy(nn.Module):
-    """π(a|s) as a :class:`Gaussian`; state-dependent log-std clipped to [log_std_min, log_std_max]."""
+    """π(a|s) as a :class:`Gaussian`; state-dependent log-std clipped to [log_std_min, log_std_max], one learned
+    log-std vector (``state_dependent_std=False``) or a fixed unit std (``fixed_std``)."""
 
     encoder: nn.Module
     hidden_dims: Sequence[int]
@@ -176,35 +177,44 @@ class GaussianPolicy(nn.Module):
     log_std_max: float = 2.0
     state_dependent_std: bool = True
     layer_norm: bool = False
+    fixed_std: bool = False
+    dropout_rate: float | None = None
 
     @nn.compact
     def __call__(self, obs, temperature: float = 1.0, train: bool = False):
         h = self.encoder(obs)
-        h = MLP(self.hidden_dims, activate_final=True, layer_norm=self.layer_norm)(h, train)
+        h = MLP(self.hidden_dims, activate_final=True, layer_norm=self.layer_norm, dropout_rate=self.dropout_rate)(h, train)
         loc = nn.Dense(self.action_dim, kernel_init=default_init)(h)
-        if self.state_dependent_std:
-            log_std = nn.Dense(self.action_dim, kernel_init=default_init)(h)
+        if self.fixed_std:
+            log_std = jnp.zeros_like(loc)
         else:
-            log_std = jnp.broadcast_to(self.param("log_std", nn.initializers.zeros, (self.action_dim,)), loc.shape)
-        log_std = jnp.clip(log_std, self.log_std_min, self.log_std_max) + jnp.log(temperature)
+            if self.state_dependent_std:
+                log_std = nn.Dense(self.action_dim, kernel_init=default_init)(h)
+            else:
+                log_std = jnp.broadcast_to(self.param("log_std", nn.initializers.zeros, (self.action_dim,)), loc.shape)
+            log_std = jnp.clip(log_std, self.log_std_min, self.log_std_max)
+        log_std = log_std + jnp.log(temperature)
         if not self.tanh_squash:
             loc = jnp.tanh(loc)
         return Gaussian(loc, log_std, tanh=self.tanh_squash)
 
 
 class DeterministicPolicy(nn.Module):
-    """a = tanh(MLP(s)) (TD3)."""
+    """a = tanh(MLP(s)) (TD3), or with ``output="clip"`` the linear output clipped to [-1, 1] (the mean of
+    jaxrl2's unit-std ``NormalPolicy``, which the D5RL release's pixel TD3+BC acts with)."""
 
     encoder: nn.Module
     hidden_dims: Sequence[int]
     action_dim: int
     layer_norm: bool = False
+    output: str = "tanh"
 
     @nn.compact
     def __call__(self, obs, train: bool = False):
         h = self.encoder(obs)
         h = MLP(self.hidden_dims, activate_final=True, layer_norm=self.layer_norm)(h, train)
-        return jnp.tanh(nn.Dense(self.action_dim, kernel_init=default_init)(h))
+        out = nn.Dense(self.action_dim, kernel_init=default_init)(h)
+        return jnp.clip(out, -1.0, 1.0) if self.output == "clip" else jnp.tanh(out)
 
 
 class Temperature(nn.Module):

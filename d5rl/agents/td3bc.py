@@ -4,6 +4,13 @@ Actor: maximise λ·Q(s, π(s)) − (π(s) − a)², with λ = α / mean|Q| (sto
 Critic: clipped double Q with target-policy smoothing noise.  The actor and the
 targets update every ``policy_freq`` critic updates.
 
+The defaults are the TD3+BC authors' (the paper's choice for state tasks).  For pixels the paper names
+jaxrl2's TD3+BC, whose form the D5RL release runs (``pixel_td3bc/{actor,critic}_updater.py``) and the
+settings file selects: the actor is the mean of a unit-std Gaussian, clipped rather than tanh-squashed
+(``actor_output="clip"``); the target action is a sample of that Gaussian (``target_policy_std=1``) plus
+smoothing noise of std 0.1 clipped at 0.5; the actor and the targets update at every step
+(``policy_freq=1``); the actor's Q is the mean of the two critics (``actor_q="mean"``), not the first.
+
 Metrics: ``critic/loss``, ``critic/q``, ``critic/target_q``, ``actor/loss``,
 ``actor/bc_mse``, ``actor/q``, ``actor/lambda``.
 """
@@ -18,7 +25,7 @@ import numpy as np
 
 from d5rl.agents.augment import augment_batch
 from d5rl.agents.common import copy_tree, ENCODER_DEFAULTS, Agent, make_train_state, nonpytree_field, obs_ndims, prepare_example
-from d5rl.agents.config import Config
+from d5rl.agents.config import Config, ConfigError
 from d5rl.agents.networks import Critic, DeterministicPolicy, soft_update
 from d5rl.agents.encoders import is_pixel_obs, make_encoder
 
@@ -43,6 +50,8 @@ class TD3BCAgent(Agent):
     def critic_loss(self, critic_params, batch, key):
         cfg = self.config
         next_a = self.actor.apply_fn({"params": self.target_actor_params}, batch["next_observations"])
+        if cfg.target_policy_std:  # a sample of the target actor's Gaussian (the release's pixel TD3+BC)
+            next_a = next_a + cfg.target_policy_std * jax.random.normal(jax.random.fold_in(key, 1), next_a.shape)
         noise = jnp.clip(cfg.policy_noise * jax.random.normal(key, next_a.shape), -cfg.noise_clip, cfg.noise_clip)
         next_a = jnp.clip(next_a + noise, -1.0, 1.0)
         next_q = self.critic.apply_fn({"params": self.target_critic_params}, batch["next_observations"], next_a).min(0)
@@ -53,7 +62,8 @@ class TD3BCAgent(Agent):
 
     def actor_loss(self, actor_params, batch):
         pi = self.actor.apply_fn({"params": actor_params}, batch["observations"])
-        q = self.critic.apply_fn({"params": self.critic.params}, batch["observations"], pi)[0]
+        qs = self.critic.apply_fn({"params": self.critic.params}, batch["observations"], pi)
+        q = qs.mean(0) if self.config.actor_q == "mean" else qs[0]
         lam = jax.lax.stop_gradient(self.config.alpha / (jnp.abs(q).mean() + 1e-8))
         bc = ((pi - batch["actions"]) ** 2).mean()
         loss = -lam * q.mean() + bc
@@ -133,8 +143,12 @@ class TD3BCAgent(Agent):
         config = get_config() if config is None else config
         ex_obs, ex_act = prepare_example(example_observations, example_actions)
         rng, k_a, k_c = jax.random.split(jax.random.PRNGKey(seed), 3)
+        output, actor_q = config.get("actor_output", "tanh"), config.get("actor_q", "first")  # ReBRAC: TD3's
+        if output not in ("tanh", "clip") or actor_q not in ("first", "mean"):
+            raise ConfigError(f"{config.agent_name}: actor_output={output!r}, actor_q={actor_q!r}",
+                              "actor_output is tanh or clip; actor_q is first or mean")
         actor_def = DeterministicPolicy(make_encoder(config), config.hidden_dims, ex_act.shape[-1],
-                                        layer_norm=config.actor_layer_norm)
+                                        layer_norm=config.actor_layer_norm, output=output)
         critic_def = Critic(make_encoder(config), config.hidden_dims, 2, config.critic_layer_norm)
         actor = make_train_state(actor_def, k_a, (ex_obs,), config.actor_lr)
         critic = make_train_state(critic_def, k_c, (ex_obs, ex_act), config.critic_lr)
@@ -151,9 +165,12 @@ def get_config() -> Config:
         discount=0.99,  # γ
         tau=0.005,  # Polyak rate of the targets
         alpha=2.5,  # α in λ = α / mean|Q| (TD3+BC paper)
-        policy_noise=0.2,  # std of target-policy smoothing noise (TD3)
+        policy_noise=0.2,  # std of target-policy smoothing noise (TD3; release pixel TD3+BC: 0.1)
         noise_clip=0.5,  # clip of that noise (TD3)
-        policy_freq=2,  # actor/target update every this many critic updates (TD3)
+        target_policy_std=0.0,  # std of a Gaussian around the target action before the noise (release pixels: 1)
+        policy_freq=2,  # actor/target update every this many critic updates (TD3; release pixels: 1)
+        actor_output="tanh",  # tanh(f(s)) (TD3) or "clip": f(s) clipped to [-1, 1] (release pixels)
+        actor_q="first",  # the actor maximises Q1 (TD3+BC) or "mean": the mean of both critics (release pixels)
         exploration_noise=0.1,  # Gaussian action noise when collecting online data (TD3)
         critic_layer_norm=False,  # LayerNorm in the critics
         actor_layer_norm=False,  # LayerNorm in the actor

@@ -76,6 +76,15 @@ class ChunkedArray:
         return gather_rows(idx, len(self), self.shape[1:], self.dtype, self.bounds, self.chunks.__getitem__)
 
 
+
+def mc_tail(last_reward: float, gamma: float, terminal: bool) -> float:
+    """The value after an episode's last step that its Monte-Carlo return starts from: 0 after a terminal
+    state; after a time limit the last reward held forever, ``r_T / (1 − γ)`` (the D5RL release's tail, so its
+    last step's return is ``r_T + γ·r_T / (1 − γ) = r_T / (1 − γ)``; 0 when γ = 1)."""
+    if terminal or gamma >= 1.0:
+        return 0.0
+    return float(last_reward) / (1.0 - float(gamma))
+
 class Dataset:
     """An offline dataset: flat arrays plus episode structure.
 
@@ -267,8 +276,9 @@ class Dataset:
     def mc_returns(self, gamma: float) -> np.ndarray:
         """Discounted reward-to-go within each episode, (N,) float32.
 
-        Episodes cut by a time limit are *not* bootstrapped: the sum simply stops at
-        the last stored reward (a lower bound when rewards are non-negative).
+        An episode cut by a time limit (its last transition is not terminal) is bootstrapped with its last
+        reward held forever, ``r_T / (1 − γ)`` (:func:`mc_tail`), as the D5RL release computes Cal-QL's bound
+        (``kitchen_data_generator.py``); an episode that ends in a terminal state is not.
         """
         gamma = float(gamma)
         if gamma not in self._mc_cache:
@@ -276,8 +286,10 @@ class Dataset:
             out = np.empty_like(rewards)
             lengths, starts = self.episode_lengths, self.episode_starts
             tmax = int(lengths.max())
-            # Walk backwards over the time index, vectorized across episodes.
-            acc = np.zeros(len(lengths))
+            last = starts + lengths - 1
+            terminal = np.asarray(self.arrays["terminals"][last], bool)
+            # Walk backwards over the time index, vectorized across episodes, from each episode's tail value.
+            acc = np.array([mc_tail(r, gamma, t) for r, t in zip(rewards[last], terminal)], np.float64)
             for t in range(tmax - 1, -1, -1):
                 live = lengths > t
                 pos = starts[live] + t

@@ -155,9 +155,52 @@ def trained_on(cell_dir: Path) -> dict | None:
 
 
 def stale_reason(cell: Cell, cell_dir: Path) -> str | None:
-    """Why a cell's result describes data its task no longer has (the dataset's version or generator changed
-    since it trained), or None: current, or no dataset recorded."""
+    """Why a cell's result no longer describes what the same command would train, or None (current, or
+    nothing recorded to tell): its task's data changed (dataset or generator version), or, for d5rl's
+    trainer, its agent's code (:attr:`d5rl.agents.common.Agent.version`) or the settings it resolves to."""
     from d5rl.datasets.generation import stale_data
 
-    return stale_data(cell.task, trained_on(cell_dir))
+    return stale_data(cell.task, trained_on(cell_dir)) or stale_agent(cell, cell_dir)
+
+
+# Loop settings that change what a run learns (the others change how it is evaluated, logged or executed).
+LEARNING_KEYS = ("frame_stack", "offline_ratio", "start_steps", "buffer_capacity", "dataset_episodes")
+
+
+def stale_agent(cell: Cell, cell_dir: Path) -> str | None:
+    """Why a cell d5rl's trainer ran was trained by another agent than the one its command gives now: an older
+    version of the agent's code, or other resolved settings (a value in ``d5rl/configs/settings.json`` or an
+    agent default changed), compared with its ``config.json``; None when they agree or nothing was recorded."""
+    if cell.job != DEFAULT_JOB:
+        return None
+    try:
+        record = json.loads((Path(cell_dir) / CONFIG_FILE).read_text())
+    except (OSError, ValueError):
+        return None
+    if not isinstance(record, dict) or not isinstance(record.get("agent"), dict):
+        return None
+    from d5rl.agents import get_agent
+    from d5rl.settings import resolve
+
+    try:
+        now = get_agent(cell.algo)[0].version
+        resolved = resolve(cell.algo, cell.task, {**cell.protocol, **cell.overrides}, offline_steps=cell.offline_steps,
+                           online_steps=cell.online_steps, tuned=cell.tuned)
+    except D5RLError:  # a task or algorithm this code no longer has: nothing to compare with
+        return None
+    was = record.get("agent_version", 1)
+    if was != now:
+        return f"trained with {cell.algo} v{was}; d5rl's {cell.algo} is now v{now}"
+    agent, train = resolved.agent.to_dict(), resolved.train.to_dict()
+    old_agent, old_train = record["agent"], record.get("train") or {}
+    # Compared: the keys both have.  Values the trainer fills from the data (None here: observation statistics,
+    # action size) are not settings; a key added since the cell ran keeps the old behaviour as its default (a
+    # change of behaviour bumps the agent's version).
+    diffs = [k for k in sorted(agent) if k in old_agent and agent[k] is not None and agent[k] != old_agent[k]]
+    diffs += [k for k in LEARNING_KEYS if k in old_train and old_train[k] != train.get(k)]
+    if not diffs:
+        return None
+    both = {**old_train, **old_agent}
+    now_all = {**train, **agent}
+    return "trained with other settings: " + ", ".join(f"{k} {both.get(k)!r} -> {now_all.get(k)!r}" for k in diffs)
 

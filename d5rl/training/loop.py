@@ -31,6 +31,7 @@ from d5rl.progress import progress_bar
 from d5rl.agents import get_agent
 from d5rl.agents.config import Config
 from d5rl.agents.encoders import is_pixel_obs
+from d5rl.datasets.dataset import mc_tail
 from d5rl.errors import D5RLError
 from d5rl.training.checkpoint import Checkpoint, load_checkpoint, restore_agent, save_checkpoint
 from d5rl.training.config import check_run
@@ -126,7 +127,8 @@ def train(
     sampler = Sampler(ds, cfg.frame_stack, agent_cls.extra_batch_keys, agent_cfg.get("discount", 0.99))
     example = sampler.sample(1, np.random.default_rng(0))
     resume = load_checkpoint(run_dir)
-    _write_config(run_dir, settings, agent_cfg, seed, resumed=resume is not None, dataset=_data_record(ds))
+    _write_config(run_dir, settings, agent_cfg, seed, resumed=resume is not None, dataset=_data_record(ds),
+                  agent_version=agent_cls.version)
     logger = Logger(run_dir, tensorboard=cfg.tensorboard)
     run = Run(task_id, seed, offline_steps, online_steps, run_dir, cfg, agent_cls, agent_cfg, sampler, example,
               is_pixel_obs(example["observations"]), logger,
@@ -160,17 +162,20 @@ def _data_record(ds) -> dict | None:
 
 
 def _write_config(run_dir: Path, settings, agent_cfg: Config, seed: int, resumed: bool,
-                  dataset: dict | None = None) -> None:
-    """``config.json``: what this run is, including the dataset it trains on (reports use it to tell results
-    of older data apart); a resumed run must be the same run on the same data."""
-    resolved = {**settings.to_json(), "seed": seed, "agent": agent_cfg.to_dict(),
+                  dataset: dict | None = None, agent_version: int = 1) -> None:
+    """``config.json``: what this run is, including the dataset it trains on and the version of the agent's
+    code (reports use both to tell results of older data or older agents apart); a resumed run must be the
+    same run on the same data."""
+    resolved = {**settings.to_json(), "seed": seed, "agent": agent_cfg.to_dict(), "agent_version": agent_version,
                 **({"dataset": dataset} if dataset is not None else {})}
     path = run_dir / "config.json"
     if resumed and path.exists():
         old = json.loads(path.read_text())
         keys = ("algo", "task_id", "seed", "agent")
-        if {k: old.get(k) for k in keys} != {k: resolved[k] for k in keys}:
-            raise RunDirError(f"{run_dir} holds a run with a different algorithm, task, seed or agent config",
+        if {k: old.get(k) for k in keys} != {k: resolved[k] for k in keys} \
+                or old.get("agent_version", 1) != agent_version:
+            raise RunDirError(f"{run_dir} holds a run with a different algorithm, task, seed, agent config or "
+                              "agent version",
                               "pick another --run-dir, or delete that directory to start over")
         if "dataset" in old and dataset is not None and old["dataset"] != dataset:
             raise RunDirError(f"{run_dir} holds a run trained on other data ({old['dataset']}); this one loads "
@@ -275,7 +280,8 @@ def online_phase(run: Run, agent, state: RunState):
         if term or trunc:
             state.buffer.end_episode()
             if needs_mc:
-                state.buffer.set_mc_returns(ep_idx, ep_rew, run.sampler.mc_gamma)
+                tail = mc_tail(ep_rew[-1], run.sampler.mc_gamma, bool(term))  # as the offline data's returns
+                state.buffer.set_mc_returns(ep_idx, ep_rew, run.sampler.mc_gamma, bootstrap=tail)
             run.logger.log(state.step, {"train/episode_return": sum(ep_rew), "train/episode_length": len(ep_rew)})
             ep_idx, ep_rew = [], []
             state.episode += 1
@@ -299,6 +305,10 @@ def load_run(run_dir: str | Path):
     if ckpt is None:
         raise RunDirError(f"{run_dir} has no checkpoint yet", "wait for the first checkpoint or train longer")
     agent_cls, agent_config_fn = get_agent(resolved["algo"])
+    was = resolved.get("agent_version", 1)
+    if was != agent_cls.version:  # its networks and config keys may be another version's
+        raise RunDirError(f"{run_dir} was trained by {resolved['algo']} v{was}; this d5rl's is v{agent_cls.version}",
+                          "evaluate it with the d5rl that trained it, or train it again")
     cfg = Config(resolved["agent"])
     env = make_task_env(resolved["task_id"], resolved["train"]["frame_stack"])
     obs, _ = env.reset(seed=0)

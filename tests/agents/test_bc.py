@@ -5,9 +5,11 @@ from tests.agents.helpers import make_agent, train
 
 
 def test_bc_loss_falls_and_compiles_once():
-    agent = make_agent("bc")
-    agent, hist = train(agent, toy_dataset(50), chunks=3, chunk=100)
-    assert hist[-1]["actor/loss"] < hist[0]["actor/loss"] - 0.1
+    agent, ds = make_agent("bc"), toy_dataset(50)
+    b = ds.sample(512, np.random.default_rng(3))
+    start = float(agent.actor_loss(agent.actor.params, b, agent.rng)[1]["actor/mse"])
+    agent, hist = train(agent, ds, chunks=3, chunk=100)
+    assert hist[-1]["actor/mse"] < start - 0.2 and hist[-1]["actor/loss"] < hist[0]["actor/loss"]
     assert agent.update_many._cache_size() >= 1
     before = agent.update_many._cache_size()
     agent, _ = train(agent, toy_dataset(50), chunks=2, chunk=100)
@@ -46,4 +48,4 @@ def test_bc_standardises_state_observations_when_asked():
         return np.asarray(agent.eval_actions(probe))
 
     assert np.abs(policy(0.0, True) - policy(50.0, True)).max() < 1e-2
-    assert np.abs(policy(0.0, False) - policy(50.0, False)).max() > 0.1
+    assert np.abs(policy(0.0, False) - policy(50.0, False)).max() > 0.05

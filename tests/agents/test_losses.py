@@ -117,12 +117,54 @@ def close(got, want):
 
 
 # --- BC, IQL, IDQL ------------------------------------------------------------------------------------------
-def test_bc_loss_is_the_negative_log_likelihood():
+def test_bc_loss_is_least_squares_on_a_tanh_mean_with_unit_std():
+    """The release's BC (``UnitStdNormalPolicy``): -log N(a; tanh(f(s)), I) = ½‖a − tanh(f(s))‖² + (d/2)·log 2π."""
     agent, b = make("bc"), batch()
+    loss, info = agent.actor_loss(agent.actor.params, b, jax.random.PRNGKey(1))
+    p = P(agent.actor.params)
+    assert set(p) == {"MLP_0", "Dense_0"}  # a mean head only: no std parameters
+    mean = np.tanh(mlp(p["MLP_0"], b["observations"].astype(np.float64), 2, activate_final=True)
+                   @ p["Dense_0"]["kernel"] + p["Dense_0"]["bias"])
+    sq = ((mean - b["actions"]) ** 2).sum(-1)
+    close(loss, (0.5 * sq + 0.5 * ACT * math.log(2 * math.pi)).mean())
+    close(info["actor/mse"], sq.mean())
+    close(info["actor/log_std"], 0.0)
+
+
+def test_bc_learned_std_variant_is_the_negative_log_likelihood():
+    agent, b = make("bc", learned_std=True), batch()
     loss, info = agent.actor_loss(agent.actor.params, b, jax.random.PRNGKey(1))
     loc, log_std = gaussian(agent.actor.params, b["observations"], agent.config, tanh_squash=False)
     close(loss, -normal_logp(loc, log_std, b["actions"]).mean())
     close(info["actor/mse"], ((loc - b["actions"]) ** 2).sum(-1).mean())
+
+
+def test_bc_dropout_acts_in_training_only():
+    agent, b = make("bc", dropout_rate=0.5), batch()
+    losses = {float(agent.actor_loss(agent.actor.params, b, jax.random.PRNGKey(k))[0]) for k in range(3)}
+    assert len(losses) == 3  # a new dropout mask per key
+    plain = make("bc", dropout_rate=0.0)
+    ev = np.asarray(agent.eval_actions(b["observations"]))
+    np.testing.assert_allclose(ev, np.asarray(plain.eval_actions(b["observations"])), rtol=1e-6)  # same init
+
+
+def test_bc_learning_rate_follows_the_release_cosine():
+    """Cosine decay over the release's horizon: an offline-only run of N updates decays over 2N (the release's
+    scripts budget 500k online updates after 500k offline ones also when they train offline only)."""
+    from d5rl.agents.bc import BCAgent
+
+    cfg = BCAgent.resolve_config(make("bc").config, offline_steps=10, online_steps=0)
+    assert cfg.actor_decay_steps == 20
+    assert BCAgent.resolve_config(make("bc").config, offline_steps=10, online_steps=30).actor_decay_steps == 40
+    # wired into the optimizer: with a horizon of one update the second update moves nothing (its lr is 0),
+    # with a constant lr it does
+    for steps, moves in ((1, False), (0, True)):
+        agent, b = make("bc", actor_lr=1e-3, actor_decay_steps=steps), batch()
+        once = agent.update(b)[0]
+        twice = once.update(b)[0]
+        moved = any(np.abs(np.asarray(x) - np.asarray(y)).max() > 0 for x, y in
+                    zip(jax.tree_util.tree_leaves(once.actor.params), jax.tree_util.tree_leaves(twice.actor.params)))
+        assert moved == moves, steps
 
 
 @pytest.mark.parametrize("name", ["iql", "idql"])
@@ -148,23 +190,70 @@ def test_iql_actor_loss_is_advantage_weighted_regression():
     close(loss, -(w * normal_logp(loc, log_std, b["actions"])).mean())
 
 
+def test_idql_takes_two_actor_steps_per_critic_step():
+    """The release's IDQL: per update, one value and one critic step on the batch and two actor steps, on its
+    first and second halves, each followed by the EMA of the sampling weights."""
+    from d5rl.agents.networks import soft_update
+
+    agent = make("idql", critic_hidden_dims=(8, 8), hidden_dim=8, num_blocks=1, batch_size=6, augment=False)
+    rng = np.random.default_rng(3)
+    b = {**batch(), "observations": rng.normal(size=(6, OBS)).astype(np.float32),
+         "next_observations": rng.normal(size=(6, OBS)).astype(np.float32),
+         "actions": rng.uniform(-0.9, 0.9, (6, ACT)).astype(np.float32), "rewards": np.ones(6, np.float32),
+         "masks": np.ones(6, np.float32), "mc_returns": np.zeros(6, np.float32)}
+    new, _ = agent.update(b)
+    _, _, k1, k2 = jax.random.split(agent.rng, 4)
+    actor, ema = agent.actor, agent.target_actor_params
+    for part, key in (({k: v[:3] for k, v in b.items()}, k1), ({k: v[3:] for k, v in b.items()}, k2)):
+        g, _ = jax.grad(agent.actor_loss, has_aux=True)(actor.params, part, key)
+        actor = actor.apply_gradients(grads=g)
+        ema = soft_update(ema, actor.params, agent.config.actor_ema)
+    for got, want in zip(jax.tree_util.tree_leaves((new.actor.params, new.target_actor_params)),
+                         jax.tree_util.tree_leaves((actor.params, ema))):
+        np.testing.assert_allclose(np.asarray(got), np.asarray(want), rtol=1e-5, atol=1e-7)
+    assert int(new.actor.step) == 2 and int(new.critic.step) == 1
+
+
+@pytest.mark.parametrize("name", ["ddpm_bc", "idql"])
+def test_diffusion_lr_decays_over_the_release_horizon(name):
+    """Actor lr 3e-4 with a cosine over the release's offline + online updates (500k + 500k in its scripts, also
+    for offline-only runs: an offline-only run of N updates decays over 2N)."""
+    from d5rl.settings import resolve
+
+    for task in ("kitchen-standard-mixed-v0", "wx-sorting-v0", "a1-walk-v0", "kitchen-standard-mixed-state-v0"):
+        cfg = resolve(name, task, offline_steps=500_000).agent
+        assert (cfg.actor_lr, cfg.actor_decay_steps) == (3e-4, 1_000_000), task
+    assert resolve(name, "a1-walk-v0", offline_steps=100, online_steps=50).agent.actor_decay_steps == 150
+
+
 # --- CQL and Cal-QL -----------------------------------------------------------------------------------------
+@pytest.mark.parametrize("form", ["release", "paper"])
 @pytest.mark.parametrize("name", ["cql", "calql"])
-def test_cql_critic_loss(name):
-    agent, b = make(name, cql_n_actions=3, cql_alpha=2.0, discount=0.9), batch()
-    key = jax.random.PRNGKey(3)
+def test_cql_critic_loss(name, form):
+    """release (the default; ``critic_updater.py``): the log-sum-exp over uniform and π(s) actions, the TD target
+    the best of n actions of π(s') (max-Q backup); paper: π(s') actions in the log-sum-exp too, one-sample
+    TD target."""
+    release = form == "release"
+    agent = make(name, cql_n_actions=3, cql_alpha=2.0, discount=0.9, cql_next_actions=not release,
+                 cql_max_target_backup=release)
+    b, key = batch(), jax.random.PRNGKey(3)
     loss, info = agent.critic_loss(agent.critic.params, b, key)
     cfg, n = agent.config, 3
     k_next, k_rand, k_cur, k_nxt = jax.random.split(key, 4)
     obs, nobs = b["observations"], b["next_observations"]
     loc_s, ls_s = gaussian(agent.actor.params, obs, cfg, tanh_squash=True)
     loc_n, ls_n = gaussian(agent.actor.params, nobs, cfg, tanh_squash=True)
-    # TD: r + γ·mask·min_i Q_target_i(s', a'), a' ~ π(s') (no entropy backup in CQL)
-    a_next, _ = tanh_sample(loc_n, ls_n, np.asarray(jax.random.normal(k_next, (B, ACT)), np.float64))
-    target = b["rewards"] + 0.9 * b["masks"] * critic(agent.target_critic_params, nobs, a_next).min(0)
+    # TD: r + γ·mask·min_i Q_target_i(s', a') (no entropy backup in CQL); release: max over n draws a' ~ π(s')
+    if release:
+        a_next, _ = tanh_sample(loc_n, ls_n, np.asarray(jax.random.normal(k_next, (n, B, ACT)), np.float64))
+        next_q = np.stack([critic(agent.target_critic_params, nobs, a_next[i]).min(0) for i in range(n)]).max(0)
+    else:
+        a_next, _ = tanh_sample(loc_n, ls_n, np.asarray(jax.random.normal(k_next, (B, ACT)), np.float64))
+        next_q = critic(agent.target_critic_params, nobs, a_next).min(0)
+    target = b["rewards"] + 0.9 * b["masks"] * next_q
     qs = critic(agent.critic.params, obs, b["actions"])
     td = ((qs - target) ** 2).mean(1).sum()
-    # conservative term: importance-sampled log-sum-exp over uniform, π(s) and π(s') actions
+    # conservative term: importance-sampled log-sum-exp over uniform and π(s) actions (paper: and π(s'))
     rand = np.asarray(jax.random.uniform(k_rand, (n, B, ACT), minval=-1.0, maxval=1.0), np.float64)
     cur, cur_lp = tanh_sample(loc_s, ls_s, np.asarray(jax.random.normal(k_cur, (n, B, ACT)), np.float64))
     nxt, nxt_lp = tanh_sample(loc_n, ls_n, np.asarray(jax.random.normal(k_nxt, (n, B, ACT)), np.float64))
@@ -176,11 +265,18 @@ def test_cql_critic_loss(name):
     if name == "calql":  # Cal-QL: policy-action values bounded below by the Monte-Carlo return
         q_cur = np.maximum(q_cur, b["mc_returns"])
         q_nxt = np.maximum(q_nxt, b["mc_returns"])
-    cat = np.concatenate([q_rand - ACT * math.log(0.5), q_nxt - nxt_lp[None], q_cur - cur_lp[None]], 1)
-    ood = logsumexp(cat, 1)
+    parts = [q_rand - ACT * math.log(0.5)] + ([] if release else [q_nxt - nxt_lp[None]]) + [q_cur - cur_lp[None]]
+    ood = logsumexp(np.concatenate(parts, 1), 1)
     close(info["critic/td_loss"], td)
     close(info["critic/cql_loss"], 2.0 * (ood - qs).mean(1).sum())
     close(loss, td + 2.0 * (ood - qs).mean(1).sum())
+
+
+def test_cql_defaults_are_the_release_form():
+    from d5rl.agents.cql import get_config
+
+    cfg = get_config()
+    assert (cfg.cql_n_actions, cfg.cql_next_actions, cfg.cql_max_target_backup) == (4, False, True)
 
 
 def test_sac_actor_and_temperature_losses_of_cql():
@@ -210,6 +306,43 @@ def test_td3bc_losses():
     q1 = critic(agent.critic.params, b["observations"], a)[0]
     lam = 2.5 / np.abs(q1).mean()
     close(agent.actor_loss(agent.actor.params, b)[0], -lam * q1.mean() + ((a - b["actions"]) ** 2).mean())
+
+
+def test_td3bc_pixel_form_of_the_release():
+    """jaxrl2's pixel TD3+BC as the release runs it: a clipped linear actor, the target action a sample of the
+    unit-std Gaussian around it plus noise 0.1 clipped at 0.5, and the actor's Q the mean of both critics."""
+    agent = make("td3bc", alpha=2.0, discount=0.9, policy_noise=0.1, noise_clip=0.5, target_policy_std=1.0,
+                 actor_output="clip", actor_q="mean", policy_freq=1)
+    b, key = batch(), jax.random.PRNGKey(6)
+
+    def actor(params, obs):  # the linear head, clipped (no tanh)
+        p = P(params)
+        h = mlp(p["MLP_0"], obs.astype(np.float64), len(p["MLP_0"]), activate_final=True)
+        return np.clip(h @ p["Dense_0"]["kernel"] + p["Dense_0"]["bias"], -1, 1)
+
+    gauss = np.asarray(jax.random.normal(jax.random.fold_in(key, 1), (B, ACT)), np.float64)
+    noise = np.clip(0.1 * np.asarray(jax.random.normal(key, (B, ACT)), np.float64), -0.5, 0.5)
+    a_next = np.clip(actor(agent.target_actor_params, b["next_observations"]) + gauss + noise, -1, 1)
+    target = b["rewards"] + 0.9 * b["masks"] * critic(agent.target_critic_params, b["next_observations"], a_next).min(0)
+    qs = critic(agent.critic.params, b["observations"], b["actions"])
+    close(agent.critic_loss(agent.critic.params, b, key)[0], ((qs - target) ** 2).mean(1).sum())
+    a = actor(agent.actor.params, b["observations"])
+    q = critic(agent.critic.params, b["observations"], a).mean(0)
+    lam = 2.0 / np.abs(q).mean()
+    close(agent.actor_loss(agent.actor.params, b)[0], -lam * q.mean() + ((a - b["actions"]) ** 2).mean())
+    np.testing.assert_allclose(np.asarray(agent.eval_actions(b["observations"])), a, rtol=1e-5, atol=1e-6)
+
+
+def test_td3bc_pixel_settings_are_the_release_form():
+    from d5rl.settings import resolve
+
+    for task in ("kitchen-standard-mixed-v0", "wx-sorting-v0"):
+        c = resolve("td3bc", task).agent
+        assert (c.actor_output, c.target_policy_std, c.policy_noise, c.noise_clip, c.policy_freq, c.actor_q) == \
+            ("clip", 1.0, 0.1, 0.5, 1, "mean"), task
+    c = resolve("td3bc", "kitchen-standard-mixed-state-v0").agent  # the TD3+BC authors' form for states
+    assert (c.actor_output, c.target_policy_std, c.policy_noise, c.policy_freq, c.actor_q) == ("tanh", 0.0, 0.2, 2,
+                                                                                                "first")
 
 
 # --- ReBRAC ------------------------------------------------------------------------------------------------

@@ -58,12 +58,15 @@ def test_next_observations_follow_episode_boundaries():
 
 
 def test_mc_returns_brute_force():
+    """Reward-to-go; an episode cut by its time limit (the second: not terminal) continues with its last reward
+    forever, r_T / (1 − γ) (the D5RL release's tail), one that ends in a terminal state does not."""
     ds = make_ds()
     g = 0.9
     want = []
-    for e, t in enumerate((3, 5, 2)):
-        r = (np.arange(t) + 1.0) * (e + 1)
-        want += [sum(g ** k * r[j + k] for k in range(t - j)) for j in range(t)]
+    for e, (t, term) in enumerate(zip((3, 5, 2), (True, False, True))):
+        r = list((np.arange(t) + 1.0) * (e + 1)) + ([] if term else [(e + 1.0) * t] * 2000)  # γ^2000 ≈ 0
+        want += [sum(g ** k * r[j + k] for k in range(len(r) - j)) for j in range(t)]
+    assert want[7] == pytest.approx(10.0 / (1 - g))  # the cut episode's last step: r_T / (1 − γ)
     np.testing.assert_allclose(ds.mc_returns(g), want, rtol=1e-6)
     b = ds.sample(8, np.random.default_rng(0), mc_gamma=g, indices=np.arange(8))
     np.testing.assert_allclose(b["mc_returns"], want[:8], rtol=1e-6)

@@ -3,6 +3,7 @@ generator version) is stale; the report leaves it out of every table and lists i
 command trains it again."""
 
 import csv
+import dataclasses
 import json
 from pathlib import Path
 
@@ -69,3 +70,32 @@ def test_stale_cells_leave_the_tables_and_the_same_command_trains_them_again(tmp
 
     third = run_bench(cells, tmp_path, workers=0, progress=False)
     assert sorted(third.skipped) == sorted(c.key for c in cells) and not third.ok
+
+
+def test_a_result_is_stale_when_its_agent_version_or_resolved_settings_changed(tmp_path):
+    """d5rl's trainer records the agent's version and resolved settings in config.json: a cell trained by an
+    older version of the agent's code, or with a setting that now resolves otherwise, is stale."""
+    from d5rl.agents import get_agent
+    from d5rl.runner.grid import stale_agent
+    from d5rl.settings import resolve
+
+    [cell] = expand_grid([TASK], ["bc"], [0], 10, 0)
+    r = resolve("bc", TASK, offline_steps=10)
+    record = {**r.to_json(), "seed": 0, "agent_version": get_agent("bc")[0].version}
+
+    def why(rec):
+        (tmp_path / "config.json").write_text(json.dumps(rec))
+        return stale_reason(cell, tmp_path)
+
+    assert why(record) is None
+    assert why({**record, "agent": {**record["agent"], "obs_mean": [0.5]}}) is None  # filled from the data
+    assert why({**record, "agent": {k: v for k, v in record["agent"].items() if k != "dropout_rate"}}) is None
+    old = why({k: v for k, v in record.items() if k != "agent_version"})  # recorded before versions: v1
+    assert old == f"trained with bc v1; d5rl's bc is now v{get_agent('bc')[0].version}"
+    other = why({**record, "agent": {**record["agent"], "actor_lr": 0.5}})
+    assert other == f"trained with other settings: actor_lr 0.5 -> {r.agent.actor_lr!r}"
+    frames = why({**record, "train": {**record["train"], "frame_stack": 4}})
+    assert frames == "trained with other settings: frame_stack 4 -> 1"
+    assert why({**record, "train": {**record["train"], "eval_episodes": 99}}) is None  # evaluation only
+    custom = dataclasses.replace(cell, job=JOB)  # a custom job's config.json is its own business
+    assert stale_agent(custom, tmp_path) is None

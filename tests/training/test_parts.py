@@ -9,6 +9,7 @@ import numpy as np
 from d5rl.envs.kitchen.subtasks import SUBTASK_NAMES, SUBTASKS
 from d5rl.envs.kitchen.task import KitchenEnv
 from d5rl.training.logger import Logger
+from d5rl.datasets.dataset import mc_tail
 from d5rl.training.replay import NO_RETURN, ReplayBuffer
 
 
@@ -22,6 +23,8 @@ def test_replay_buffer_roundtrip_and_mc_returns():
     assert buf.data["mc_returns"][0] == NO_RETURN
     buf.set_mc_returns(idx, [1.0, 1.0, 1.0], gamma=0.5)
     np.testing.assert_allclose(buf.data["mc_returns"][:3], [1.75, 1.5, 1.0])
+    buf.set_mc_returns(idx, [1.0, 1.0, 1.0], gamma=0.5, bootstrap=mc_tail(1.0, 0.5, terminal=False))  # time limit
+    np.testing.assert_allclose(buf.data["mc_returns"][:3], [2.0, 2.0, 2.0])  # 1 / (1 - 0.5) at every step
     for t in range(4):  # wraps around
         buf.insert(obs, np.zeros(2), 0.0, 0.0, obs)
     assert len(buf) == 5 and buf.pos == 2
