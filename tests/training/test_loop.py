@@ -93,7 +93,7 @@ def test_the_run_records_the_dataset_it_trains_on(tmp_path):
     # the same directory resumed on other data is another run
     ds.metadata["dataset_version"] = recorded["dataset_version"] + 1
     with pytest.raises(RunDirError, match="trained on other data"):
-        train("bc", "toy-reach-v0", 16, 0, 0, overrides(), tmp_path / "r", dataset=ds)
+        train("bc", "toy-reach-v0", 8, 0, 0, overrides(), tmp_path / "r", dataset=ds)
     # in-memory data (no generated dataset behind it) records nothing
     train("bc", "toy-reach-v0", 8, 0, 0, overrides(), tmp_path / "m", dataset=toy_dataset(5))
     assert "dataset" not in json.loads((tmp_path / "m" / "config.json").read_text())
