@@ -208,8 +208,8 @@ def _train_bc(tmp_path):
     assert (run / "checkpoint").exists() or any(run.glob("checkpoint*"))
 
 
-@pytest.mark.slow
 def test_train_bc_on_an_imported_minari_dataset(tmp_path, monkeypatch, scripted):
+    # seconds after the D4RL one (the session's JAX compilation cache); ~20 s alone
     root = write_minari(tmp_path / "minari", scripted)
     assert main(["import-kitchen-human", str(root), "--no-render", "--no-progress"]) == 0
     _train_bc(tmp_path)
@@ -229,6 +229,18 @@ def test_action_check_measures_whether_the_actions_move_our_robot(tmp_path, scri
         assert check["median_rad"] < 1e-6
     else:
         assert check["median_rad"] > check["median_step_rad"]
+
+
+def test_a_minari_id_is_found_under_home_without_minari_datasets_path(tmp_path, monkeypatch, scripted):
+    from d5rl.envs.kitchen.human import locate
+
+    monkeypatch.delenv("MINARI_DATASETS_PATH", raising=False)
+    monkeypatch.setenv("HOME", str(tmp_path))
+    root = write_minari(tmp_path / ".minari" / "datasets", scripted[:1])
+    assert locate("D4RL/kitchen/mixed-v2") == ("minari", root / "data" / "main_data.hdf5")
+    assert locate(root) == locate(root / "data") == locate(root / "data" / "main_data.hdf5")
+    path = write_d4rl(tmp_path / "kitchen_mixed-v0.hdf5", scripted[:1])
+    assert locate(path) == ("d4rl", path)
 
 
 def test_replay_mismatches_are_reported_per_episode(tmp_path, scripted, capsys):
