@@ -49,8 +49,8 @@ def test_every_setting_is_a_key_of_its_agent_or_the_loop():
 
 # How a source starts: the D5RL paper's appendix C, a file of the authors' release, another paper, a pointer
 # to the entry whose values it repeats, or d5rl's own reason.
-CITATION = re.compile(r"^(paper App\. C, \S|release (examples|jaxrl2)/\S+\.(py|sh)|(IQL|TD3\+BC|RLPD) paper \(|as \S|d5rl"
-                      r"( takes|:) \S)")
+CITATION = re.compile(r"^(paper App\. C, \S|release (examples|jaxrl2)/\S+\.(py|sh)|(IQL|TD3\+BC|RLPD) paper \("
+                      r"|as \S|d5rl( takes|:) \S)")
 
 
 def test_every_entry_cites_a_checkable_source():

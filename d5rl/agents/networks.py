@@ -183,7 +183,8 @@ class GaussianPolicy(nn.Module):
     @nn.compact
     def __call__(self, obs, temperature: float = 1.0, train: bool = False):
         h = self.encoder(obs)
-        h = MLP(self.hidden_dims, activate_final=True, layer_norm=self.layer_norm, dropout_rate=self.dropout_rate)(h, train)
+        h = MLP(self.hidden_dims, activate_final=True, layer_norm=self.layer_norm,
+                dropout_rate=self.dropout_rate)(h, train)
         loc = nn.Dense(self.action_dim, kernel_init=default_init)(h)
         if self.fixed_std:
             log_std = jnp.zeros_like(loc)

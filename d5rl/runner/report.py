@@ -19,8 +19,9 @@
 * ``report.md`` — all of it on one page, with links to rollout videos the trainer saved.
 
 ``±`` is the standard deviation over seeds with ``ddof=0`` (``numpy.std``).  Cells trained on data
-their task no longer has (a newer dataset or generator version) are left out of every table and listed
-as stale; ``d5rl bench`` with the same command trains them again.
+their task no longer has (a newer dataset or generator version), or by another agent than the one their
+command now gives (an older agent version, settings that resolve otherwise), are left out of every table
+and listed as stale; ``d5rl bench`` with the same command trains them again.
 """
 
 from __future__ import annotations
@@ -520,7 +521,8 @@ def write_report(run_dir: Path | str, out_dir: Path | str | None = None, reps: i
     stale = [r for r in results if r.done and r.stale is not None]
     parts = [f"# Benchmark report: {run_name}", "",
              f"{sum(r.counts for r in results)} of {len(results)} cells finished"
-             f"{f' ({len(stale)} more on older data: see Stale cells)' if stale else ''}. Scores are normalized "
+             f"{f' ({len(stale)} more on older data or agents: see Stale cells)' if stale else ''}. "
+             "Scores are normalized "
              "(0 = random, 1 = expert reference of the task); each cell's score is its last evaluation "
              "of the phase. ± is the standard deviation over seeds (ddof=0).", ""]
     agg_rows = []
@@ -587,8 +589,9 @@ def write_report(run_dir: Path | str, out_dir: Path | str | None = None, reps: i
         parts += [f"- {r.task}/{r.algo}/seed{r.seed}: offline score from step {r.final_step.get('offline')} "
                   f"of {r.offline_steps}" for r in early] + [""]
     if stale:
-        parts += ["## Stale cells", "", "Trained on data their task no longer has, so left out of every table above. "
-                  "The same `d5rl bench` command trains them again on the current data.", "",
+        parts += ["## Stale cells", "", "Trained on data their task no longer has, or by an older version or other "
+                  "settings of their agent, so left out of every table above. The same `d5rl bench` command trains "
+                  "them again.", "",
                   "| Cell | Why |", "|---|---|"]
         parts += [f"| {r.task}/{r.algo}/seed{r.seed} | {r.stale} |" for r in stale] + [""]
     incomplete = [r for r in results if not r.done]

@@ -118,7 +118,8 @@ def close(got, want):
 
 # --- BC, IQL, IDQL ------------------------------------------------------------------------------------------
 def test_bc_loss_is_least_squares_on_a_tanh_mean_with_unit_std():
-    """The release's BC (``UnitStdNormalPolicy``): -log N(a; tanh(f(s)), I) = ½‖a − tanh(f(s))‖² + (d/2)·log 2π."""
+    """The release's BC (``UnitStdNormalPolicy``):
+    -log N(a; tanh(f(s)), I) = ½‖a − tanh(f(s))‖² + (d/2)·log 2π."""
     agent, b = make("bc"), batch()
     loss, info = agent.actor_loss(agent.actor.params, b, jax.random.PRNGKey(1))
     p = P(agent.actor.params)
