@@ -56,7 +56,8 @@ def cmd_info(args) -> int:
         return 0
     d = s.dataset
     status, manifest = dataset_status(s)
-    print(f"  dataset:      {d.name} v{d.version}, {full_size(d)} episodes, {'importer' if d.imported else 'generator'} {d.producer}")
+    producer = f"{'importer' if d.imported else 'generator'} {d.producer}"
+    print(f"  dataset:      {d.name} v{d.version}, {full_size(d)} episodes, {producer}")
     if d.description:
         print(f"                {d.description}")
     if not d.imported:
@@ -117,10 +118,9 @@ def cmd_verify(args) -> int:
     print(f"CORRUPT: {len(report.problems)} problem(s) in {report.root}", file=sys.stderr)
     for p in report.problems:
         print(f"  {p}", file=sys.stderr)
-    imported = get_spec(args.task).dataset.imported
-    print(f"  fix: `{regenerate_command(args.task, args.seed)}` "
-          + ("imports the data again" if imported else "regenerates the missing and damaged shards (intact ones are kept)"),
-          file=sys.stderr)
+    what = ("imports the data again" if get_spec(args.task).dataset.imported
+            else "regenerates the missing and damaged shards (intact ones are kept)")
+    print(f"  fix: `{regenerate_command(args.task, args.seed)}` {what}", file=sys.stderr)
     return 1
 
 

@@ -105,6 +105,13 @@ def _identity(dspec: DatasetSpec, seed: int, generator_version: str) -> dict:
     })
 
 
+def identity(dspec: DatasetSpec, seed: int | None = None) -> dict:
+    """What the manifest and every shard of ``dspec``'s data written by this code carry (an importer
+    writes it too, so the loader checks imported data like generated data)."""
+    seed = dspec.default_seed if seed is None else int(seed)
+    return _identity(dspec, seed, str(resolve(dspec.producer).version))
+
+
 def _json_normal(obj):
     """``obj`` as it reads back from JSON (tuples become lists), so comparisons with disk are exact."""
     import json

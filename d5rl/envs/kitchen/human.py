@@ -205,7 +205,8 @@ def read_minari(path: Path, subtask_idx: dict[str, np.ndarray]) -> list[SourceEp
                 qpos[:, subtask_idx[task]] = achieved  # noise-free, unlike observation
                 claimed[task] = np.linalg.norm(achieved[1:] - desired[1:], axis=-1) < THRESHOLD
             if len(actions) >= 1:
-                episodes.append(SourceEpisode(qpos, qvel, actions, claimed, {"source_episode": int(name.split("_")[1])}))
+                meta = {"source_episode": int(name.split("_")[1])}
+                episodes.append(SourceEpisode(qpos, qvel, actions, claimed, meta))
     return episodes
 
 
@@ -272,7 +273,8 @@ def completion_order(completed: np.ndarray) -> list[str]:
     """Subtasks in the order they first reach their goal in an episode (``infos/completed`` rows)."""
     from d5rl.envs.kitchen.subtasks import SUBTASK_NAMES
 
-    first = {SUBTASK_NAMES[j]: int(np.argmax(completed[:, j])) for j in range(completed.shape[1]) if completed[:, j].any()}
+    first = {SUBTASK_NAMES[j]: int(np.argmax(completed[:, j]))
+             for j in range(completed.shape[1]) if completed[:, j].any()}
     return sorted(first, key=lambda t: (first[t], SUBTASK_NAMES.index(t)))
 
 
@@ -299,7 +301,7 @@ def import_human(source: str | Path, *, render: bool = True, cameras=("overview"
         raise D5RLError(f"{path} holds no episode with a transition", "check that the download finished")
     dspec = HUMAN_DATASET
     root = generation.dataset_root(dspec)
-    ident = generation._identity(dspec, dspec.default_seed, KitchenHumanImport.version)
+    ident = generation.identity(dspec)
     checker = CompletionChecker(model)
     mixed = [SUBTASK_NAMES.index(t) for t in MIXED]
     env = KitchenEnv(obs_mode="state")
