@@ -117,7 +117,8 @@ def probe() -> dict[str, tuple[bool, str]]:
         "libm": (all(m in hwcaps for m in LIBM_MASK),
                  "GLIBC_TUNABLES at process start: " + (env.get("GLIBC_TUNABLES") or "(unset)")),
         "numpy": (not on, "SIMD targets on: " + (", ".join(on) or "none (baseline kernels)")),
-        "openblas": (core is not None and core.lower() == OPENBLAS_CORE.lower(), f"core {core}"),
+        "openblas": (core is not None and core.lower() == OPENBLAS_CORE.lower(),
+                     f"core {core}" if core else "numpy is not linked to OpenBLAS (install numpy's PyPI wheel)"),
     }
 
 
