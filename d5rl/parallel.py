@@ -356,6 +356,11 @@ def connect_ray(address: str | None):
         except ConnectionError as e:
             raise D5RLError(f"cannot reach a Ray cluster at {address or 'auto'} ({e})",
                             "start one with `ray start --head` or pass --ray ADDRESS of a running head node") from e
+        except ValueError as e:
+            if "ray[client]" not in str(e):
+                raise
+            raise MissingDependencyError(f"--ray {address} connects through Ray Client, which is not installed",
+                                         "pip install 'ray[client]', or run on the head node with --ray auto") from None
     return ray
 
 

@@ -186,6 +186,12 @@ def register(spec: TaskSpec) -> TaskSpec:
     return spec
 
 
+def minari_env_id(task_id: str) -> str:
+    """The Gymnasium id of the environment a Minari export of ``task_id`` names (``d5rl/a1-walk-minari-v0``)."""
+    tid = parse_task_id(task_id)
+    return f"d5rl/{tid.family}-{tid.name}-minari-v{tid.version}"
+
+
 def _register_with_gymnasium(spec: TaskSpec) -> None:
     import gymnasium
 
@@ -197,6 +203,14 @@ def _register_with_gymnasium(spec: TaskSpec) -> None:
         entry_point=spec.entry_point,
         max_episode_steps=spec.max_episode_steps,
         kwargs=dict(spec.env_kwargs),
+        disable_env_checker=True,
+    )
+    # the environment of a Minari export of this task (d5rl.datasets.export), so gymnasium.make finds its id
+    gymnasium.register(
+        id=minari_env_id(spec.id),
+        entry_point="d5rl.datasets.export:make_minari_env",
+        max_episode_steps=spec.max_episode_steps,
+        kwargs={"task_id": spec.id},
         disable_env_checker=True,
     )
 

@@ -22,6 +22,8 @@ _HINT = (
 
 def make_renderer(model: mujoco.MjModel, height: int, width: int) -> mujoco.Renderer:
     """A ``mujoco.Renderer`` whose offscreen buffer is grown to fit ``height x width``."""
+    if d5rl.envs.GL_PROBLEM is not None:
+        raise RenderBackendError(f"cannot render: {d5rl.envs.GL_PROBLEM}", _HINT)
     model.vis.global_.offheight = max(int(model.vis.global_.offheight), int(height))
     model.vis.global_.offwidth = max(int(model.vis.global_.offwidth), int(width))
     try:

@@ -204,6 +204,13 @@ def test_evaluate_refuses_zero_episodes():
     ("no_actions", "has no 'actions' array"),
     ("nan", "observations has 1 NaN or infinite values (first in row 2)"),
     ("short_terminals", "terminals has 5 rows"),
+    ("string_obs", "observations holds |S3 values, not numbers"),
+    ("terminals_2d", "terminals has shape (9, 2), expected 1 dimension(s)"),
+    ("all_terminal", "no episode has 2 or more rows"),
+    ("huge_values", "observations has values beyond ±1000 (first in row 4: 1e+30)"),
+    ("complex_actions", "actions holds complex64 values, not numbers"),
+    ("declared_huge", "observations declares shape (30000000, 60) (6,866 MiB) in a file of"),
+    ("not_hdf5", "is not an HDF5 file"),
 ])
 def test_import_kitchen_human_refuses_a_broken_d4rl_file(capsys, tmp_path, damage, needle):
     h5py = pytest.importorskip("h5py")
@@ -217,11 +224,51 @@ def test_import_kitchen_human_refuses_a_broken_d4rl_file(capsys, tmp_path, damag
         obs[2, 5] = np.nan
     if damage == "short_terminals":
         terminals = terminals[:5]
+    if damage == "string_obs":
+        obs = np.full((n, 60), b"abc")
+    if damage == "terminals_2d":
+        terminals = np.zeros((n, 2), bool)
+    if damage == "all_terminal":
+        terminals = np.ones(n, bool)
+    if damage == "huge_values":
+        obs[4, 3] = 1e30
+    if damage == "complex_actions":
+        actions = actions.astype(np.complex64)
     path = tmp_path / "kitchen_mixed-v0.hdf5"
     with h5py.File(path, "w") as f:
-        f["observations"] = obs
+        if damage == "declared_huge":  # a few kB: chunked, never written, so only the fill value exists
+            f.create_dataset("observations", shape=(30_000_000, 60), dtype=np.float32, chunks=(1000, 60))
+        else:
+            f["observations"] = obs
         if damage != "no_actions":
             f["actions"] = actions
         f["terminals"] = terminals
+    if damage == "not_hdf5":
+        path.write_text("not an HDF5 file\n")
     one_line_error(capsys, ["import-kitchen-human", str(path)], needle)
     assert not paths.home().exists()  # refused before anything was written
+
+
+@pytest.mark.parametrize("value, needle", [("bogus", "MUJOCO_GL='bogus' is not one of MuJoCo's backends")])
+def test_a_bad_mujoco_gl_does_not_break_list_and_rendering_says_why(tmp_path, value, needle):
+    import os
+    import subprocess
+    import sys
+
+    env = {**os.environ, "MUJOCO_GL": value, "D5RL_HOME": str(tmp_path)}
+    listed = subprocess.run([sys.executable, "-m", "d5rl.cli", "list"], env=env, capture_output=True, text=True,
+                            timeout=120)
+    assert listed.returncode == 0 and "a1-walk-v0" in listed.stdout, listed.stderr[-2000:]
+    render = subprocess.run([sys.executable, "-c", "import d5rl\nenv = d5rl.make_env('toy-reach-pixels-v0')\n"
+                             "from d5rl.rendering import make_renderer\n"
+                             "import mujoco\nmake_renderer(mujoco.MjModel.from_xml_string('<mujoco/>'), 8, 8)"],
+                            env=env, capture_output=True, text=True, timeout=120)
+    assert render.returncode != 0 and needle in render.stderr.splitlines()[-1], render.stderr[-2000:]
+
+
+def test_a_gl_backend_whose_library_is_missing_is_named():
+    from d5rl.envs import gl_problem
+
+    assert gl_problem("egl", loadable=lambda *a: True) is None
+    assert gl_problem("osmesa", loadable=lambda *a: False) == "MUJOCO_GL=osmesa needs libOSMesa, which is not installed"
+    assert gl_problem("disable") is None

@@ -11,11 +11,17 @@ a camera the episode has, a run number (an index into the directories given on t
 or a path relative to a run directory, and is resolved and checked to lie inside ``$D5RL_HOME`` or
 that run directory (:mod:`d5rl.browse.safe`).  Endpoints only read, except for the frame strips
 cached under ``$D5RL_HOME/browse-cache``.
+
+Requests must name this server in their ``Host`` header: ``localhost``, a loopback or other IP address,
+the ``--host`` it listens on, or this machine's host name.  A web page on another site can point a name
+of its own at 127.0.0.1 (DNS rebinding) and then read this server as that name from the user's browser;
+such a request carries the attacker's name and gets 400.  An IP address cannot be rebound.
 """
 
 from __future__ import annotations
 
 import contextlib
+import ipaddress
 import socket
 import sys
 from pathlib import Path
@@ -37,9 +43,58 @@ def plotly_js() -> Path:
     return path
 
 
-def create_app(run_dirs: list[Path] | None = None):
-    """The ASGI app over the tasks in the registry, ``$D5RL_HOME`` and the given run directories."""
+LOCAL_NAMES = ("localhost", "127.0.0.1", "::1")
+
+
+def host_names(host: str | None = None) -> frozenset[str]:
+    """The names a request's ``Host`` may give for a server listening on ``host`` (IP addresses pass anyway)."""
+    names = {*LOCAL_NAMES, socket.gethostname(), socket.getfqdn(), *([host] if host else [])}
+    return frozenset(n.lower().rstrip(".") for n in names if n)
+
+
+def host_allowed(header: str, names: frozenset[str]) -> bool:
+    """Whether a ``Host`` header (``name``, ``name:port``, ``[v6]:port``) names this server."""
+    h = header.strip().lower()
+    if h.startswith("["):
+        h = h[1:h.find("]")] if "]" in h else ""
+    elif h.count(":") == 1:
+        h = h.split(":")[0]
+    h = h.rstrip(".")
+    if not h:
+        return False
+    if h in names:
+        return True
+    try:
+        ipaddress.ip_address(h)
+    except ValueError:
+        return False
+    return True
+
+
+class HostCheck:
+    """ASGI middleware: 400 for a request whose ``Host`` is not a name of this server (see the module docstring)."""
+
+    def __init__(self, app, names: frozenset[str]):
+        self.app, self.names = app, names
+
+    async def __call__(self, scope, receive, send):
+        if scope["type"] in ("http", "websocket"):
+            host = dict(scope["headers"]).get(b"host", b"").decode("latin-1")
+            if not host_allowed(host, self.names):
+                from starlette.responses import PlainTextResponse
+
+                msg = (f"Host {host!r} is not a name of this d5rl browse server; open it as http://localhost:PORT/ "
+                       "or start it with --host NAME")
+                await PlainTextResponse(msg, status_code=400)(scope, receive, send)
+                return
+        await self.app(scope, receive, send)
+
+
+def create_app(run_dirs: list[Path] | None = None, host: str | None = None):
+    """The ASGI app over the tasks in the registry, ``$D5RL_HOME`` and the given run directories, answering
+    requests addressed to ``host`` (see :func:`host_names`)."""
     from starlette.applications import Starlette
+    from starlette.middleware import Middleware
     from starlette.responses import FileResponse, JSONResponse, PlainTextResponse
     from starlette.routing import Mount, Route
     from starlette.staticfiles import StaticFiles
@@ -155,7 +210,7 @@ def create_app(run_dirs: list[Path] | None = None):
         yield
         frames.close()
 
-    app = Starlette(routes=routes, lifespan=lifespan)
+    app = Starlette(routes=routes, lifespan=lifespan, middleware=[Middleware(HostCheck, names=host_names(host))])
     app.state.frames = frames
     return app
 
@@ -180,7 +235,7 @@ def serve(host: str, port: int, run_dirs: list[Path]) -> None:
                             "pass an address of this machine with --host (omit it for 127.0.0.1)") from None
         except OSError as e:
             raise D5RLError(f"cannot listen on {host}:{port}: {e.strerror}", "pick another port with --port") from None
-    app = create_app(run_dirs)
+    app = create_app(run_dirs, host)
     if host not in ("127.0.0.1", "localhost", "::1"):
         print(f"warning: listening on {host}: anyone who can reach this machine can read your datasets and runs",
               file=sys.stderr)

@@ -10,6 +10,12 @@ Minari's own root (``$MINARI_DATASETS_PATH``, else ``~/.minari/datasets``) and l
   ``pixels/side`` is stored as ``pixels__side`` (:func:`minari_key`), and the environment that
   ``dataset.recover_environment()`` builds applies the same renaming (:class:`MinariKeys`), so
   its observations match the stored ones key for key.  :func:`d5rl_key` maps back.
+- the environment id (``d5rl/a1-walk-minari-v0``) is registered with Gymnasium when d5rl is imported,
+  so ``gymnasium.make(dataset.spec.env_spec.id)`` works as for any Minari dataset;
+- the dataset's ``infos/*`` arrays (forward speed, subtasks completed, stage, ...) are the episodes'
+  ``infos``, so a task's score can be computed from the Minari file alone.  Minari's infos have one row
+  per observation (the reset's, then each step's); d5rl stores most infos per transition, so their row 0
+  (the reset's) is zeros.
 """
 
 from __future__ import annotations
@@ -21,7 +27,7 @@ import gymnasium as gym
 import numpy as np
 
 from d5rl.errors import D5RLError, MissingDependencyError
-from d5rl.registry import get_spec, parse_task_id, resolve
+from d5rl.registry import get_spec, minari_env_id, parse_task_id, resolve
 
 SEP = "__"
 
@@ -58,9 +64,8 @@ def make_minari_env(task_id: str, **kwargs) -> gym.Env:
 
 def minari_env_spec(task_id: str) -> gym.envs.registration.EnvSpec:
     spec = get_spec(task_id)
-    tid = parse_task_id(spec.id)
     return gym.envs.registration.EnvSpec(
-        id=f"d5rl/{tid.family}-{tid.name}-minari-v{tid.version}",
+        id=minari_env_id(spec.id),
         entry_point="d5rl.datasets.export:make_minari_env",
         kwargs={"task_id": spec.id},
         max_episode_steps=spec.max_episode_steps,
@@ -72,6 +77,19 @@ def _episode_obs(arrays: dict[str, np.ndarray], space: gym.Space):
     if isinstance(space, gym.spaces.Dict):
         return {k: arrays["observations/" + d5rl_key(k)] for k in space.spaces}
     return arrays["observations"]
+
+
+def _episode_infos(arrays: dict[str, np.ndarray]) -> dict[str, np.ndarray]:
+    """``infos/<name>`` arrays with one row per observation, as Minari stores them (see the module docstring)."""
+    n_obs = len(arrays["actions"]) + 1
+    out = {}
+    for key, v in arrays.items():
+        if key.startswith("infos/"):
+            v = np.asarray(v)
+            if len(v) == n_obs - 1:
+                v = np.concatenate([np.zeros((1,) + v.shape[1:], v.dtype), v])
+            out[minari_key(key[len("infos/"):])] = v
+    return out
 
 
 def _check(name: str, values: np.ndarray, space: gym.spaces.Box, what: str) -> None:
@@ -117,7 +135,7 @@ def export_minari(task: str, *, dataset_id: str | None = None, seed: int | None 
         _check("actions", a["actions"], act_space, f"episode {i}")
         buffers.append(EpisodeBuffer(
             id=i, observations=obs, actions=a["actions"], rewards=a["rewards"].astype(np.float64),
-            terminations=a["terminals"], truncations=a["timeouts"],
+            terminations=a["terminals"], truncations=a["timeouts"], infos=_episode_infos(a) or None,
         ))
     try:
         with warnings.catch_warnings():  # d5rl has no contact address to give; everything else is filled in

@@ -38,16 +38,17 @@ import errno
 import hashlib
 import json
 import os
+import re
 import shutil
 import socket
 from pathlib import Path
-from typing import Iterable
+from typing import Any, Iterable
 
 import numpy as np
 
 from d5rl.datasets import chunks, lock
-from d5rl.files import dump_json, owner_tag, write_atomic
-from d5rl.errors import D5RLError, DatasetCorruptError, DatasetVersionError
+from d5rl.files import JSON_MAX_BYTES, dump_json, json_type_error, owner_tag, read_json, write_atomic
+from d5rl.errors import D5RLError, DatasetCorruptError, DatasetVersionError, is_int
 
 FORMAT_VERSION = 1
 MANIFEST = "manifest.json"
@@ -78,29 +79,117 @@ def sha256_file(path: Path) -> str:
     return h.hexdigest()
 
 
-def load_json(path: Path, what: str) -> dict:
-    try:
-        with open(path) as f:
-            return json.load(f)
-    except FileNotFoundError:
-        raise
-    except (json.JSONDecodeError, UnicodeDecodeError) as e:
-        raise DatasetCorruptError(f"{what} {path} is not valid JSON ({e})", _regen_hint(path)) from e
+def load_json(path: Path, what: str) -> Any:
+    """A dataset's JSON file, bounded (:func:`d5rl.files.read_json`); damage is a :class:`DatasetCorruptError`
+    whose hint is the command that repairs it."""
+    return read_json(path, what, error=DatasetCorruptError, hint=_regen_hint(path))
 
 
 def _regen_hint(path: Path) -> str:
     return "run `d5rl generate TASK`: it regenerates missing or damaged shards and keeps the intact ones"
 
 
+_FILE_NAME = re.compile(r"[A-Za-z0-9_][A-Za-z0-9_.+-]*")  # what key_to_filename makes: no path, no dot-file
+_SHA256 = re.compile(r"[0-9a-f]{64}")
+
+
+def _array_problem(info: Any, stored: bool) -> tuple[str, Any, str] | None:
+    """(field, value, expected) for the first wrong-typed field of one array's description, or None;
+    ``stored``: a shard's array (with its file and checksum), not the manifest's summary."""
+    if not isinstance(info, dict):
+        return "", info, "an object"
+    shape = info.get("shape")
+    if not isinstance(shape, list) or not all(is_int(n, lo=0) for n in shape):
+        return ".shape", shape, "a list of non-negative integers"
+    try:
+        dtype = np.dtype(info.get("dtype"))
+        ok = isinstance(info.get("dtype"), str) and not dtype.hasobject
+    except (TypeError, ValueError):
+        ok = False
+    if not ok:
+        return ".dtype", info.get("dtype"), "a numpy dtype string such as '<f4'"
+    if info.get("align") not in ("step", "transition"):
+        return ".align", info.get("align"), "'step' or 'transition'"
+    if stored:
+        if not isinstance(info.get("file"), str) or not _FILE_NAME.fullmatch(info["file"]):
+            return ".file", info.get("file"), "a file name inside the shard"
+        if not isinstance(info.get("sha256"), str) or not _SHA256.fullmatch(info["sha256"]):
+            return ".sha256", info.get("sha256"), "64 hex digits"
+        if not isinstance(info.get("encoding", ""), str):
+            return ".encoding", info.get("encoding"), "a string"
+    return None
+
+
+def _arrays_problem(arrays: Any, stored: bool, where: str) -> tuple[str, Any, str] | None:
+    if not isinstance(arrays, dict) or not arrays:
+        return where, arrays, "an object of arrays"
+    for key, info in arrays.items():
+        problem = _array_problem(info, stored)
+        if problem is not None:
+            return f"{where}[{key!r}]{problem[0]}", problem[1], problem[2]
+    return None
+
+
+def _range_problem(episodes: Any, where: str) -> tuple[str, Any, str] | None:
+    if not (isinstance(episodes, list) and len(episodes) == 2 and all(is_int(n, lo=0) for n in episodes)
+            and episodes[0] < episodes[1]):
+        return where, episodes, "[first, end) episode numbers"
+    return None
+
+
+def _manifest_problem(m: dict) -> tuple[str, Any, str] | None:
+    for key in ("num_episodes", "num_transitions", "episodes_per_shard"):
+        if not is_int(m.get(key), lo=0):
+            return key, m.get(key), "a non-negative integer"
+    problem = _arrays_problem(m.get("arrays"), False, "arrays")
+    if problem is not None:
+        return problem
+    shards = m.get("shards")
+    if not isinstance(shards, list) or not shards:
+        return "shards", shards, "a list of shards"
+    for i, e in enumerate(shards):
+        if not isinstance(e, dict) or not isinstance(e.get("name"), str) or not re.fullmatch(r"shard-\d+", e["name"]):
+            return f"shards[{i}]", e, "an object with the shard's name"
+        problem = _range_problem(e.get("episodes"), f"shards[{i}].episodes") or _arrays_problem(
+            e.get("arrays"), True, f"shards[{i}].arrays")
+        if problem is not None:
+            return problem
+    if shards[-1]["episodes"][1] < m["num_episodes"]:
+        return "num_episodes", m["num_episodes"], f"at most its last shard's end, {shards[-1]['episodes'][1]}"
+    return None
+
+
+def _record_problem(r: dict) -> tuple[str, Any, str] | None:
+    problem = _range_problem(r.get("episodes"), "episodes")
+    if problem is not None:
+        return problem
+    n = r["episodes"][1] - r["episodes"][0]
+    lengths = r.get("episode_lengths")
+    if not isinstance(lengths, list) or len(lengths) != n or not all(is_int(x, lo=1) for x in lengths):
+        return "episode_lengths", lengths, f"{n} positive integers"
+    metas = r.get("episode_meta")
+    if not isinstance(metas, list) or len(metas) != n or not all(isinstance(x, dict) for x in metas):
+        return "episode_meta", metas, f"{n} objects"
+    return _arrays_problem(r.get("arrays"), True, "arrays")
+
+
 def read_manifest(path: Path) -> dict:
-    """``manifest.json``; :class:`DatasetVersionError` for a format this d5rl does not read."""
+    """``manifest.json``, its fields type-checked; :class:`DatasetVersionError` for a format this d5rl does not
+    read, :class:`DatasetCorruptError` (repaired by ``d5rl generate``) for anything else wrong."""
     manifest = load_json(path, "manifest")
-    if not isinstance(manifest, dict) or manifest.get("format_version") != FORMAT_VERSION:
-        found = manifest.get("format_version") if isinstance(manifest, dict) else None
+    if not isinstance(manifest, dict):
+        raise json_type_error("manifest", path, "the file", manifest, "a JSON object", DatasetCorruptError,
+                              _regen_hint(path))
+    found = manifest.get("format_version")
+    if is_int(found) and found != FORMAT_VERSION:
         raise DatasetVersionError(
             f"{path} has format version {found!r}, this d5rl reads version {FORMAT_VERSION}",
             "use the d5rl version that wrote it, or regenerate: `d5rl generate TASK --force`",
         )
+    problem = (("format_version", found, str(FORMAT_VERSION)) if found != FORMAT_VERSION
+               else _manifest_problem(manifest))
+    if problem is not None:
+        raise json_type_error("manifest", path, *problem, DatasetCorruptError, _regen_hint(path))
     return manifest
 
 
@@ -123,9 +212,10 @@ def _owner_alive(name: str) -> bool:
     return True
 
 
-def disk_full_error(path: Path, exc: OSError) -> D5RLError | None:
+def disk_full_error(path: Path, exc: OSError, hint: str | None = None) -> D5RLError | None:
     """A one-line error for a write that failed because the disk is full (numpy's short writes
-    carry no errno, so the free space decides); None if the disk is not the cause."""
+    carry no errno, so the free space decides); None if the disk is not the cause.  ``hint``: what to
+    do (default: for data under ``D5RL_HOME``)."""
     code = getattr(exc, "errno", None)
     if code not in (None, errno.ENOSPC):
         return None  # the OS named another cause (no such directory, permission denied, ...)
@@ -136,8 +226,8 @@ def disk_full_error(path: Path, exc: OSError) -> D5RLError | None:
     if code == errno.ENOSPC or (free is not None and free < 64 << 20):
         where = f" ({free / 2**20:.0f} MiB free)" if free is not None else ""
         return D5RLError(f"the disk holding {path} is full{where}",
-                         "free some space or point D5RL_HOME at a bigger disk, then run the same command again "
-                         "(finished shards are kept)")
+                         hint or "free some space or point D5RL_HOME at a bigger disk, then run the same command "
+                         "again (finished shards are kept)")
     return None
 
 
@@ -252,13 +342,21 @@ def clean_temporaries(root: Path) -> int:
 
 
 def read_shard_record(shard_dir: Path) -> dict:
+    """A shard's ``shard.json``, its fields type-checked (:class:`DatasetCorruptError` when wrong)."""
     path = shard_dir / SHARD_META
     record = load_json(path, "shard record")
-    if record.get("format_version") != FORMAT_VERSION:
+    if not isinstance(record, dict):
+        raise json_type_error("shard record", path, "the file", record, "a JSON object", DatasetCorruptError,
+                              _regen_hint(path))
+    if is_int(record.get("format_version")) and record["format_version"] != FORMAT_VERSION:
         raise DatasetVersionError(
             f"{shard_dir} has format version {record.get('format_version')}, this d5rl reads {FORMAT_VERSION}",
             f"regenerate it: `d5rl generate TASK --force` (or delete {shard_dir.parent.parent})",
         )
+    problem = (("format_version", record.get("format_version"), str(FORMAT_VERSION))
+               if record.get("format_version") != FORMAT_VERSION else _record_problem(record))
+    if problem is not None:
+        raise json_type_error("shard record", path, *problem, DatasetCorruptError, _regen_hint(path))
     return record
 
 

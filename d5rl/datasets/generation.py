@@ -24,7 +24,7 @@ from d5rl import numerics, parallel, paths
 from d5rl.datasets import format as fmt
 from d5rl.datasets import lock
 from d5rl.datasets.episode import Episode
-from d5rl.errors import D5RLError, DatasetVersionError, is_int
+from d5rl.errors import D5RLError, DatasetCorruptError, DatasetVersionError, is_int
 from d5rl.files import dump_json, json_default
 from d5rl.registry import DatasetSpec, TaskSpec, get_spec, resolve
 
@@ -288,16 +288,22 @@ def _generate_locked(spec, dspec, seed, num_episodes, root, workers, force, prog
     generator_version = str(resolve(dspec.producer).version)
     ident = _identity(dspec, seed, generator_version)
     manifest_path = root / fmt.MANIFEST
-    manifest = None
+    manifest, repairs = None, []
     if manifest_path.exists():
-        manifest = fmt.read_manifest(manifest_path)
-        _check_identity(manifest, ident, root)
+        try:
+            manifest = fmt.read_manifest(manifest_path)
+        except DatasetCorruptError as e:  # rebuilt below from the shards, which carry everything it lists
+            repairs.append(f"{fmt.MANIFEST} ({e.message.split(': ', 1)[-1]})")
+        else:
+            _check_identity(manifest, ident, root)
     have = manifest["num_episodes"] if manifest is not None else 0
-    target = max(num_episodes, have)  # never shrink what the manifest already promises
+    # never shrink what the manifest (or, when it is damaged, the shards on disk) already promise
+    target = max(num_episodes, have if manifest is not None else _episodes_on_disk(shards_dir, dspec, ident))
+    listed = {e["name"]: e for e in manifest["shards"]} if manifest is not None else {}
 
     plan = shard_plan(target, dspec.episodes_per_shard)
     records: dict[int, dict] = {}
-    pending, repairs = [], []
+    pending = []
     for index, (start, stop) in enumerate(plan):
         shard_dir = shards_dir / fmt.shard_name(index)
         if shard_dir.exists():
@@ -307,8 +313,14 @@ def _generate_locked(spec, dspec, seed, num_episodes, root, workers, force, prog
                 rec = None
             if rec is not None:
                 _check_identity(rec, ident, shard_dir)
+                entry = listed.get(shard_dir.name)
                 if rec["episodes"] == [start, stop]:
                     problems = fmt.check_shard(shard_dir, rec)
+                    if not problems and entry is not None and entry["episodes"] == rec["episodes"] \
+                            and entry["arrays"] != rec["arrays"]:
+                        # The shard's record and the manifest disagree and either may be the damaged one:
+                        # generation is deterministic, so the regenerated shard settles it.
+                        problems = [f"{fmt.SHARD_META} disagrees with {fmt.MANIFEST}"]
                     if not problems:
                         records[index] = rec
                         continue
@@ -320,9 +332,12 @@ def _generate_locked(spec, dspec, seed, num_episodes, root, workers, force, prog
         pending.append((index, start, stop))
     # Shards beyond the plan belong to a larger earlier request; they stay valid and are kept.
     if not pending and have == target:
-        return root
+        if manifest_content(manifest) == manifest_content(
+                build_manifest(dspec, ident, [records[i] for i in range(len(plan))], target)):
+            return root
+        repairs.append(f"{fmt.MANIFEST} (disagrees with the shards)")
     if repairs:
-        print(f"repairing {len(repairs)} damaged or missing shard(s) of {dspec.name}: {', '.join(repairs[:5])}"
+        print(f"repairing {len(repairs)} damaged or missing part(s) of {dspec.name}: {', '.join(repairs[:5])}"
               + (" ..." if len(repairs) > 5 else ""), file=sys.stderr, flush=True)
 
     done_eps = sum(stop - start for i, (start, stop) in enumerate(plan) if i in records)
@@ -359,9 +374,31 @@ def _generate_locked(spec, dspec, seed, num_episodes, root, workers, force, prog
     return root
 
 
-def write_manifest(root: Path, dspec: DatasetSpec, ident: dict, records: list[dict], num_episodes: int,
+def _episodes_on_disk(shards_dir: Path, dspec: DatasetSpec, ident: dict) -> int:
+    """How many episodes the readable shards of this dataset hold, counted from the first without a gap
+    (what a damaged manifest listed, at least)."""
+    end = 0
+    for index, (start, stop) in enumerate(shard_plan(dspec.num_episodes, dspec.episodes_per_shard)):
+        try:
+            rec = fmt.read_shard_record(shards_dir / fmt.shard_name(index))
+        except (FileNotFoundError, D5RLError):
+            return end
+        if any(rec.get(k) != v for k, v in ident.items()) or rec["episodes"][0] != start:
+            return end
+        end = rec["episodes"][1]
+        if end < stop:
+            return end
+    return end
+
+
+def manifest_content(manifest: dict | None) -> dict | None:
+    """What a manifest says about the data (not the package versions that wrote it)."""
+    return None if manifest is None else {k: v for k, v in manifest.items() if k != "packages"}
+
+
+def build_manifest(dspec: DatasetSpec, ident: dict, records: list[dict], num_episodes: int,
                    extra: dict | None = None) -> dict:
-    """Publish the manifest of finished shards; ``extra``: more keys (an importer's source and replay check)."""
+    """The manifest of finished shards; ``extra``: more keys (an importer's source and replay check)."""
     lengths = [n for r in records for n in r["episode_lengths"]]
     arrays = {}
     for key, info in records[0]["arrays"].items():
@@ -379,6 +416,13 @@ def write_manifest(root: Path, dspec: DatasetSpec, ident: dict, records: list[di
         "packages": fmt.package_versions(),
         **(extra or {}),
     }
+    return _json_normal(manifest)
+
+
+def write_manifest(root: Path, dspec: DatasetSpec, ident: dict, records: list[dict], num_episodes: int,
+                   extra: dict | None = None) -> dict:
+    """Publish the manifest of finished shards (see :func:`build_manifest`)."""
+    manifest = build_manifest(dspec, ident, records, num_episodes, extra)
     with lock.publishing(root):  # replaces the old manifest (if extending) in one step
         dump_json(manifest, root / fmt.MANIFEST)
     return manifest

@@ -4,6 +4,8 @@
 
 from __future__ import annotations
 
+import contextlib
+
 import sys
 import warnings
 from pathlib import Path
@@ -99,7 +101,8 @@ def load_dataset(
     if limit < 0:
         raise ValueError(f"memory_limit_bytes must be >= 0, got {memory_limit_bytes}")
     if episodes is None and not generate and (root / fmt.MANIFEST).exists():
-        wanted = min(wanted, fmt.read_manifest(root / fmt.MANIFEST)["num_episodes"]) or wanted  # what is there
+        with contextlib.suppress(_NotReady):  # a damaged manifest is reported by _open below
+            wanted = min(wanted, _manifest(root / fmt.MANIFEST, spec, dspec)["num_episodes"]) or wanted  # what is there
     for attempt in range(3):
         try:
             return _open(spec, dspec, seed, root, wanted, episodes is not None, in_memory, limit, obs_keys,
@@ -153,11 +156,24 @@ def _check_derived_kwargs(spec: TaskSpec, dspec, kwargs: dict) -> None:
         builder(spec, None, None, episodes=0, check=True, **kwargs)
 
 
+def _repair_hint(spec: TaskSpec, dspec) -> str:
+    if dspec.imported:
+        return resolve(dspec.importer).how
+    return f"run `d5rl generate {spec.id}` (it regenerates damaged shards and keeps the rest)"
+
+
+def _manifest(path: Path, spec: TaskSpec, dspec) -> dict:
+    try:
+        return fmt.read_manifest(path)
+    except DatasetCorruptError as e:
+        raise _NotReady(DatasetCorruptError(e.message, _repair_hint(spec, dspec)), True) from None
+
+
 def _open(spec, dspec, seed, root, wanted, partial, in_memory, limit, obs_keys, workers, progress, derived_kwargs):
     from d5rl.datasets import generation
 
     manifest_path = root / fmt.MANIFEST
-    have = fmt.read_manifest(manifest_path)["num_episodes"] if manifest_path.exists() else 0
+    have = _manifest(manifest_path, spec, dspec)["num_episodes"] if manifest_path.exists() else 0
     if have < wanted and dspec.imported:
         raise _NotReady(generation.not_imported_error(spec, dspec))
     if have < wanted:
@@ -166,12 +182,12 @@ def _open(spec, dspec, seed, root, wanted, partial, in_memory, limit, obs_keys, 
             f"run `d5rl generate {spec.id}" + (f" --episodes {wanted}`" if partial else "`")))
     n = wanted
     if dspec.derived is not None:  # build missing caches first (may write; takes the write lock)
-        extra_roots = resolve(dspec.derived)(spec, root, fmt.read_manifest(manifest_path), episodes=n,
+        extra_roots = resolve(dspec.derived)(spec, root, _manifest(manifest_path, spec, dspec), episodes=n,
                                              workers=workers, progress=progress, **derived_kwargs)
     else:
         extra_roots = []
     with lock.reading(root):  # the manifest and the shards below belong together
-        manifest = fmt.read_manifest(manifest_path)
+        manifest = _manifest(manifest_path, spec, dspec)
         generation.check_current(manifest, dspec, seed, root)
         if manifest["num_episodes"] < dspec.num_episodes and not partial:
             warnings.warn(
@@ -179,8 +195,7 @@ def _open(spec, dspec, seed, root, wanted, partial, in_memory, limit, obs_keys, 
                 f"(generated with --episodes); run `d5rl generate {spec.id}` for the full dataset",
                 stacklevel=4,
             )
-        repair = (resolve(dspec.importer).how if dspec.imported else
-                  f"run `d5rl generate {spec.id}` (it regenerates damaged shards and keeps the rest)")
+        repair = _repair_hint(spec, dspec)
         shard_dirs, records = [], []
         for entry in manifest["shards"]:
             if entry["episodes"][0] >= n:

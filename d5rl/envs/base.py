@@ -35,6 +35,18 @@ class ActionError(D5RLError, ValueError):
     """An action of the wrong shape, or with NaN or infinite entries."""
 
 
+def frame_size(render_size: tuple[int, int], width: int | None = None, height: int | None = None) -> tuple[int, int]:
+    """``(height, width)`` of ``render()``'s frames: ``render_size``, with Gymnasium's ``width`` / ``height``
+    keywords (as its MuJoCo envs take them) overriding either side."""
+    from d5rl.errors import is_int
+
+    size = (int(height) if height is not None else render_size[0], int(width) if width is not None else render_size[1])
+    for name, v in (("height", height), ("width", width)):
+        if v is not None and not is_int(v, lo=1, hi=8192):
+            raise ValueError(f"{name} must be a number of pixels from 1 to 8192, got {v!r}")
+    return size
+
+
 class MujocoEnv(gym.Env):
     """Base class: physics, state save/restore, rendering.  Subclasses define the task.
 
@@ -54,9 +66,12 @@ class MujocoEnv(gym.Env):
         render_mode: str | None = None,
         render_size: tuple[int, int] = (240, 320),
         render_camera: str | int = -1,
+        width: int | None = None,
+        height: int | None = None,
     ):
         if render_mode is not None and render_mode not in self.metadata["render_modes"]:
             raise ValueError(f"render_mode must be one of {self.metadata['render_modes']}, got {render_mode!r}")
+        render_size = frame_size(render_size, width, height)
         self.model = model
         self.data = mujoco.MjData(model)
         self.frame_skip = int(frame_skip)
@@ -76,6 +91,9 @@ class MujocoEnv(gym.Env):
             raise ResetNeededError(f"{type(self).__name__}.step() was called before reset()",
                                    "call env.reset(seed=...) first")
         shape = self.action_space.shape
+        if np.iscomplexobj(action):  # numpy would drop the imaginary parts with only a warning
+            raise ActionError(f"action has complex values: {np.asarray(action).tolist()}",
+                              f"pass a real float array of shape {shape}")
         try:
             a = np.asarray(action, dtype=np.float64)
         except (TypeError, ValueError):
@@ -138,6 +156,11 @@ class MujocoEnv(gym.Env):
             gym.logger.warn("render() called without render_mode; pass render_mode='rgb_array'")
             return None
         return self.render_camera_image(self.render_camera, *self.render_size)
+
+    def __getstate__(self) -> dict:
+        """Pickling and ``copy.deepcopy`` leave the renderers out (a GL context cannot be copied); the copy
+        makes its own on its first render."""
+        return {**self.__dict__, "_renderers": {}}
 
     def close(self) -> None:
         for r in self._renderers.values():

@@ -17,9 +17,9 @@ import sys
 from pathlib import Path
 
 from d5rl.runner.grid import LOCK_FILE, WORKER_FILE
-from d5rl.training.checkpoint import LATEST, PREVIOUS, TMP_PREFIX
+from d5rl.training.checkpoint import LATEST, PREVIOUS, RUN_LOCK, TMP_PREFIX
 
-_NEVER = (PREVIOUS, LOCK_FILE, WORKER_FILE, "tb")  # tb: TensorBoard copies of the metrics
+_NEVER = (PREVIOUS, LOCK_FILE, RUN_LOCK, WORKER_FILE, "tb")  # tb: TensorBoard copies of the metrics
 
 
 def _skipped(rel: Path) -> bool:

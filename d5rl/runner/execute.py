@@ -28,7 +28,7 @@ from pathlib import Path
 
 from d5rl.runner.grid import (CELL_FILE, DONE_FILE, ERROR_FILE, FAILURES_FILE, LOCK_FILE, LOG_FILE,
                               RUNNER_FILES, Cell)
-from d5rl.files import write_atomic
+from d5rl.files import try_lock, write_atomic
 
 def write_cell_file(cell: Cell, cell_dir: Path) -> None:
     cell_dir.mkdir(parents=True, exist_ok=True)
@@ -51,24 +51,9 @@ def is_done(cell_dir: Path) -> bool:
     return (Path(cell_dir) / DONE_FILE).exists()
 
 
-@contextlib.contextmanager
 def _cell_lock(cell_dir: Path):
     """Exclusive, non-blocking lock; yields False if another process holds it."""
-    import fcntl
-
-    fd = os.open(cell_dir / LOCK_FILE, os.O_RDWR | os.O_CREAT, 0o644)
-    try:
-        try:
-            fcntl.flock(fd, fcntl.LOCK_EX | fcntl.LOCK_NB)
-        except BlockingIOError:
-            yield False
-            return
-        try:
-            yield True
-        finally:
-            fcntl.flock(fd, fcntl.LOCK_UN)
-    finally:
-        os.close(fd)
+    return try_lock(cell_dir / LOCK_FILE)
 
 
 @contextlib.contextmanager

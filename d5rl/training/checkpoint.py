@@ -30,12 +30,14 @@ from typing import Any
 
 import numpy as np
 
-from d5rl.errors import D5RLError
+from d5rl.errors import D5RLError, is_int
+from d5rl.files import json_type_error, read_bytes, read_json, read_npz
 
 FORMAT_VERSION = 1
 LATEST, PREVIOUS = "checkpoint", "checkpoint.prev"
 TMP_PREFIX = ".checkpoint.tmp-"  # a checkpoint being written: .checkpoint.tmp-<pid>
 MANIFEST = "manifest.json"
+RUN_LOCK = ".train.lock"  # held by the process training into a run directory (d5rl.training.loop)
 
 
 class CheckpointError(D5RLError):
@@ -98,31 +100,76 @@ def save_checkpoint(run_dir: str | Path, ckpt: Checkpoint) -> Path:
     return latest
 
 
+MANIFEST_MAX_BYTES = 1 << 20  # a checkpoint manifest lists four files
+
+
+def _manifest_files(manifest, where: Path) -> dict[str, dict]:
+    """The ``files`` of a checkpoint manifest, each name a plain file and each entry ``{sha256, bytes}``."""
+    files = manifest.get("files")
+    if not isinstance(files, dict):
+        raise json_type_error("checkpoint manifest", where, "files", files, "an object of file names",
+                              CheckpointError)
+    for name, info in files.items():
+        if "/" in name or name.startswith("."):
+            raise CheckpointError(f"{where} names an unexpected file {name!r}")
+        if not (isinstance(info, dict) and is_int(info.get("bytes"), lo=0) and isinstance(info.get("sha256"), str)):
+            raise json_type_error("checkpoint manifest", where, f"files[{name!r}]", info,
+                                  "an object with the file's bytes and sha256", CheckpointError)
+    return files
+
+
+def check_state(state, where: Path) -> dict:
+    """A training run's checkpoint ``state.json`` with the types ``RunState.from_json`` needs (one line if not)."""
+    def bad(field, value, expected):
+        return json_type_error("checkpoint state", where, field, value, expected, CheckpointError)
+
+    if not isinstance(state, dict):
+        raise bad("the file", state, "a JSON object")
+    for key in ("step", "online_done", "episode", "metric_count"):
+        if not is_int(state.get(key), lo=0):
+            raise bad(key, state.get(key), "a non-negative integer")
+    if not isinstance(state.get("online_started"), bool):
+        raise bad("online_started", state.get("online_started"), "true or false")
+    sums = state.get("metric_sums")
+    if not isinstance(sums, dict) or not all(isinstance(v, (int, float)) and not isinstance(v, bool)
+                                             for v in sums.values()):
+        raise bad("metric_sums", sums, "an object of numbers")
+    elapsed = state.get("elapsed_s", 0.0)
+    if isinstance(elapsed, bool) or not isinstance(elapsed, (int, float)) or not elapsed >= 0:
+        raise bad("elapsed_s", elapsed, "a non-negative number of seconds")
+    try:
+        np.random.default_rng().bit_generator.state = state.get("rng")
+    except (TypeError, ValueError, KeyError):
+        raise bad("rng", state.get("rng"), "the state of numpy's PCG64 generator") from None
+    return state
+
+
 def read_checkpoint(path: str | Path) -> Checkpoint:
-    """One checkpoint directory, every file checked against its manifest; :class:`CheckpointError` if not intact."""
+    """One checkpoint directory, every file checked against its manifest; :class:`CheckpointError` if not intact.
+
+    Every file is a regular file no larger than its manifest says, checked before it is read (a
+    symlink to ``/dev/zero`` or a FIFO is refused, not read until memory or patience runs out)."""
     path = Path(path)
     if (path / "state.pkl").exists() and not (path / MANIFEST).exists():
         raise CheckpointError(f"{path} is a pickle checkpoint of an older d5rl, which this version never opens "
                               "(unpickling can run code)", "train again from scratch in a new --run-dir")
     try:
-        manifest = json.loads((path / MANIFEST).read_bytes())
+        manifest = read_json(path / MANIFEST, "checkpoint manifest", max_bytes=MANIFEST_MAX_BYTES,
+                             error=CheckpointError)
     except FileNotFoundError:
         raise CheckpointError(f"{path / MANIFEST} is missing (an incomplete checkpoint)") from None
-    except (OSError, ValueError) as e:
-        raise CheckpointError(f"{path / MANIFEST} is unreadable ({e.__class__.__name__})") from None
     if not isinstance(manifest, dict) or manifest.get("format_version") != FORMAT_VERSION:
         version = manifest.get("format_version") if isinstance(manifest, dict) else None
         raise CheckpointError(f"{path} has checkpoint format {version!r}; this d5rl reads {FORMAT_VERSION}",
                               "use the d5rl version that wrote it, or train again in a new --run-dir")
     data: dict[str, bytes] = {}
-    for name, info in manifest.get("files", {}).items():
-        if "/" in name or name.startswith("."):
-            raise CheckpointError(f"{path / MANIFEST} names an unexpected file {name!r}")
+    for name, info in _manifest_files(manifest, path / MANIFEST).items():
         try:
-            blob = (path / name).read_bytes()
-        except OSError:
+            blob = read_bytes(path / name, info["bytes"], "checkpoint file", error=CheckpointError,
+                              hint=f"delete {path} to fall back to the previous checkpoint")
+        except FileNotFoundError:
             raise CheckpointError(f"{path / name} is missing") from None
-        if len(blob) != info.get("bytes") or _sha256(blob) != info.get("sha256"):
+        if len(blob) != info["bytes"] or _sha256(blob) != info["sha256"]:
             raise CheckpointError(f"{path / name} is damaged (size or sha256 differs from its manifest)")
         data[name] = blob
     if "agent.msgpack" not in data or "state.json" not in data:
@@ -131,13 +178,11 @@ def read_checkpoint(path: str | Path) -> Checkpoint:
         state = json.loads(data["state.json"])
     except ValueError:
         raise CheckpointError(f"{path / 'state.json'} is not valid JSON") from None
+    except RecursionError:
+        raise CheckpointError(f"{path / 'state.json'} nests too deeply to be a file d5rl wrote") from None
     buffer = None
     if "buffer.npz" in data:
-        try:
-            with np.load(io.BytesIO(data["buffer.npz"]), allow_pickle=False) as z:
-                buffer = {k: z[k] for k in z.files}
-        except (ValueError, OSError) as e:
-            raise CheckpointError(f"{path / 'buffer.npz'} is unreadable ({e})") from None
+        buffer = read_npz(data["buffer.npz"], path / "buffer.npz", error=CheckpointError)
     return Checkpoint(data["agent.msgpack"], state, buffer, path)
 
 

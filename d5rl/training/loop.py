@@ -32,8 +32,9 @@ from d5rl.agents import get_agent
 from d5rl.agents.config import Config
 from d5rl.agents.encoders import is_pixel_obs
 from d5rl.datasets.dataset import mc_tail
-from d5rl.errors import D5RLError
-from d5rl.training.checkpoint import Checkpoint, load_checkpoint, restore_agent, save_checkpoint
+from d5rl.errors import D5RLError, is_int
+from d5rl.files import json_type_error, lock_holder, read_json, try_lock
+from d5rl.training.checkpoint import RUN_LOCK, Checkpoint, check_state, load_checkpoint, restore_agent, save_checkpoint
 from d5rl.training.config import check_run
 from d5rl.training.envs import load_task_dataset, make_task_env
 from d5rl.training.logger import Logger
@@ -121,11 +122,32 @@ def train(
     if cfg.dataset_in_memory_gb is not None:
         data_kw["memory_limit_bytes"] = int(cfg.dataset_in_memory_gb * 2**30)
     ds = dataset if dataset is not None else load_task_dataset(task_id, **data_kw)
-    run_dir.mkdir(parents=True, exist_ok=True)
-
     agent_cfg = agent_cls.fit_config(settings.agent, ds)
     sampler = Sampler(ds, cfg.frame_stack, agent_cls.extra_batch_keys, agent_cfg.get("discount", 0.99))
     example = sampler.sample(1, np.random.default_rng(0))
+    check_memory(agent_cfg, example)
+    run_dir.mkdir(parents=True, exist_ok=True)
+    with try_lock(run_dir / RUN_LOCK) as locked:
+        if not locked:  # two writers would delete each other's checkpoint temporaries and log every row twice
+            holder = lock_holder(run_dir / RUN_LOCK)
+            raise RunDirError(f"another d5rl process{f' (pid {holder})' if holder else ''} is training into {run_dir}",
+                              "wait for it to finish (a second run resumes from its checkpoint), or pick another "
+                              "--run-dir")
+        try:
+            return _train_locked(settings, cfg, agent_cls, agent_cfg, sampler, example, task_id, seed, offline_steps,
+                                 online_steps, run_dir, ds)
+        except OSError as e:
+            from d5rl.datasets.format import disk_full_error
+
+            full = disk_full_error(run_dir, e, "free some space or pick a --run-dir on a bigger disk, then run the "
+                                               "same command again (it resumes from the last checkpoint)")
+            if full is not None:
+                raise full from None
+            raise
+
+
+def _train_locked(settings, cfg, agent_cls, agent_cfg, sampler, example, task_id, seed, offline_steps, online_steps,
+                  run_dir, ds) -> dict[str, Any]:
     resume = load_checkpoint(run_dir)
     _write_config(run_dir, settings, agent_cfg, seed, resumed=resume is not None, dataset=_data_record(ds),
                   agent_version=agent_cls.version)
@@ -137,6 +159,9 @@ def train(
                    mininterval=1.0, disable=not cfg.progress))
     agent, state = _start(run, resume)
     try:
+        finished = _finished_summary(run_dir, state.step, offline_steps + online_steps)
+        if finished is not None:  # ran to the end and evaluated: evaluating again would log a second final row
+            return {**finished, "agent": agent}
         agent = offline_phase(run, agent, state)
         agent = online_phase(run, agent, state)
         final = run.evaluate(agent, state, cfg.final_eval_episodes or cfg.eval_episodes)
@@ -147,6 +172,66 @@ def train(
     finally:
         run.bar.close()
         logger.close()
+
+
+def available_memory() -> int | None:
+    """Bytes the agent's arrays can use: the accelerator's limit where JAX reports one, else the host's
+    available memory (``MemAvailable``); None if neither is known."""
+    try:
+        stats = jax.devices()[0].memory_stats() or {}
+    except Exception:  # noqa: BLE001 - CPU backends report nothing
+        stats = {}
+    if stats.get("bytes_limit"):
+        return int(stats["bytes_limit"])
+    try:
+        with open("/proc/meminfo") as f:
+            for line in f:
+                if line.startswith("MemAvailable:"):
+                    return int(line.split()[1]) * 1024
+    except OSError:
+        pass
+    return None
+
+
+def memory_floor(agent_cfg: Config, example: dict) -> int:
+    """A lower bound on the bytes a run allocates: each network named by a ``*hidden_dims`` setting once, as
+    float32 parameters with their gradient and two Adam moments, and one batch of its inputs and widest
+    activations.  Every agent keeps more (critic ensembles, target networks), so a run above it cannot fit."""
+    obs = example["observations"]
+    obs_dim = sum(int(np.prod(np.shape(v)[1:])) for v in (obs.values() if isinstance(obs, dict) else [obs]))
+    act_dim = int(np.prod(np.shape(example["actions"])[1:]))
+    batch = int(agent_cfg.get("batch_size", 1))
+    total = batch * 4 * 2 * (obs_dim + act_dim)  # observations and next observations of one batch
+    for key, dims in agent_cfg.items():
+        if key.endswith("hidden_dims") and isinstance(dims, tuple) and dims:
+            widths = [min(obs_dim, 256) + act_dim, *map(int, dims), 1]
+            params = sum(a * b + b for a, b in zip(widths, widths[1:]))
+            total += 4 * 4 * params + 4 * batch * max(widths)
+    return total
+
+
+def check_memory(agent_cfg: Config, example: dict) -> None:
+    """A one-line error, before anything is allocated or written, for network widths or a batch size that
+    cannot fit (``--set hidden_dims=[1000000000]`` would otherwise fail deep in XLA and leave files behind)."""
+    need, have = memory_floor(agent_cfg, example), available_memory()
+    if have is not None and need > have:
+        from d5rl.agents.config import ConfigError
+
+        dims = {k: list(v) for k, v in agent_cfg.items() if k.endswith("hidden_dims")}
+        raise ConfigError(f"networks {dims} with batch_size={agent_cfg.get('batch_size')} need at least "
+                          f"{need / 2**30:,.1f} GiB; {have / 2**30:,.1f} GiB are available",
+                          "lower them with --set hidden_dims=... batch_size=...")
+
+
+def _finished_summary(run_dir: Path, step: int, total: int) -> dict | None:
+    """The ``summary.json`` of a run that resumed at its last step after its final evaluation, else None."""
+    if step < total:
+        return None
+    try:
+        summary = read_json(run_dir / "summary.json", "run summary", error=RunDirError)
+    except (FileNotFoundError, RunDirError):
+        return None
+    return summary if isinstance(summary, dict) and summary.get("step") == step else None
 
 
 def _data_record(ds) -> dict | None:
@@ -170,7 +255,7 @@ def _write_config(run_dir: Path, settings, agent_cfg: Config, seed: int, resumed
                 **({"dataset": dataset} if dataset is not None else {})}
     path = run_dir / "config.json"
     if resumed and path.exists():
-        old = json.loads(path.read_text())
+        old = read_run_config(run_dir)
         keys = ("algo", "task_id", "seed", "agent")
         if {k: old.get(k) for k in keys} != {k: resolved[k] for k in keys} \
                 or old.get("agent_version", 1) != agent_version:
@@ -195,7 +280,7 @@ def _start(run: Run, resume: Checkpoint | None) -> tuple[Any, RunState]:
         buffer = run.buffer(env.reset(seed=0)[0])
         buffer.load_state_dict(resume.buffer)
         env.close()
-    state = RunState.from_json(resume.state, buffer)
+    state = RunState.from_json(check_state(resume.state, Path(resume.path or ".") / "state.json"), buffer)
     if state.online_started and run.fresh_online:
         agent = run.new_agent(run.seed + 1)
     run.logger.truncate_after(state.step)
@@ -294,13 +379,32 @@ def online_phase(run: Run, agent, state: RunState):
     return agent
 
 
+def read_run_config(run_dir: Path) -> dict:
+    """A run's ``config.json`` with the fields a resumed run and ``d5rl eval`` use, type-checked (one line if not)."""
+    path = Path(run_dir) / "config.json"
+    hint = "pass the directory a `d5rl train` run wrote, or train again in a new --run-dir"
+    cfg = read_json(path, "run config", error=RunDirError, hint=hint)
+    checks = (("algo", lambda v: isinstance(v, str), "an algorithm name"),
+              ("task_id", lambda v: isinstance(v, str), "a task id"),
+              ("seed", lambda v: is_int(v, lo=0), "a non-negative integer"),
+              ("agent", lambda v: isinstance(v, dict), "an object of agent settings"),
+              ("train", lambda v: isinstance(v, dict) and is_int(v.get("frame_stack"), lo=1),
+               "an object of training settings with frame_stack"))
+    if not isinstance(cfg, dict):
+        raise json_type_error("run config", path, "the file", cfg, "a JSON object", RunDirError, hint)
+    for key, ok, expected in checks:
+        if not ok(cfg.get(key)):
+            raise json_type_error("run config", path, key, cfg.get(key), expected, RunDirError, hint)
+    return cfg
+
+
 def load_run(run_dir: str | Path):
     """``(agent, resolved_config)`` from a run directory's config and latest checkpoint."""
     run_dir = Path(run_dir)
     config_path = run_dir / "config.json"
     if not config_path.exists():
         raise RunDirError(f"{run_dir} has no config.json", "pass the directory a `d5rl train` run wrote")
-    resolved = json.loads(config_path.read_text())
+    resolved = read_run_config(run_dir)
     ckpt = load_checkpoint(run_dir)
     if ckpt is None:
         raise RunDirError(f"{run_dir} has no checkpoint yet", "wait for the first checkpoint or train longer")

@@ -27,7 +27,7 @@ from tests.browse import toy  # noqa: E402
 
 
 def client(runs=()):
-    return TestClient(create_app([Path(r) for r in runs]))
+    return TestClient(create_app([Path(r) for r in runs]), base_url="http://localhost:8765")
 
 
 def tiles(png: bytes, layout: dict) -> np.ndarray:
@@ -249,3 +249,17 @@ def test_run_labels_tell_grids_apart(tmp_path):
     assert run_labels([tmp_path / "runs/mine"]) == ["mine"]
     assert run_labels([a, tmp_path / "runs/x/cells"]) == ["results/table1-state/cells", "runs/x/cells"]
     assert run_labels([a, a]) == ["table1-state/cells", "table1-state/cells #2"]
+
+
+@pytest.mark.parametrize("host, ok", [("localhost:8765", True), ("127.0.0.1:8765", True), ("[::1]:8765", True),
+                                      ("192.168.1.7", True), ("browse-host.example", True), ("evil.example", False),
+                                      ("evil.example:8765", False), ("localhost.evil.example", False), ("", False)])
+def test_only_requests_naming_this_server_are_answered(host, ok):
+    """DNS rebinding: a page on evil.example points its name at 127.0.0.1 and reads the server from the
+    user's browser, with ``Host: evil.example``."""
+    c = TestClient(create_app([], host="browse-host.example"), base_url="http://localhost:8765")
+    r = c.get("/api/tasks", headers={"Host": host})
+    assert (r.status_code == 200) == ok, (host, r.status_code, r.text[:200])
+    if not ok:
+        assert r.status_code == 400 and "is not a name of this d5rl browse server" in r.text
+        assert c.get("/", headers={"Host": host}).status_code == 400

@@ -56,7 +56,8 @@ def test_shard_writer_stores_compressed_frames_and_reads_them_back(tmp_path):
     cw.append(frames[:12])
     cw.append(frames[12:])
     w.write("states", np.zeros((30, 2)))
-    rec = w.commit({}, {"observations/pixels/cam": "step", "states": "step"})
+    rec = w.commit({"episodes": [0, 1], "episode_lengths": [29], "episode_meta": [{}]},
+                   {"observations/pixels/cam": "step", "states": "step"})
     info = rec["arrays"]["observations/pixels/cam"]
     assert info["encoding"] == chunks.ENCODING and info["file"].endswith(".zch") and info["shape"] == [30, 12, 12, 3]
     d = tmp_path / "shard-00000"

@@ -52,3 +52,25 @@ def test_minari_export_of_pixels_is_lossless_and_matches_its_env(tmp_path, monke
     assert sorted(obs) == sorted(md.observation_space.spaces) and md.observation_space.contains(obs)
     assert recovered.spec.max_episode_steps == d5rl.get_spec(task).max_episode_steps
     recovered.close()
+
+
+def test_a_minari_export_names_an_env_gymnasium_makes_and_carries_the_infos_a_score_needs(tmp_path, monkeypatch):
+    import gymnasium
+
+    import d5rl
+
+    monkeypatch.setenv("MINARI_DATASETS_PATH", str(tmp_path / "minari"))
+    task = "kitchen-standard-mixed-state-v0"
+    ds = load_dataset(task, episodes=2, workers=1, progress=False)
+    export_minari(task, dataset_id="d5rltest/kitchen-v0", progress=False)
+    md = minari.load_dataset("d5rltest/kitchen-v0")
+    env = gymnasium.make(md.spec.env_spec.id)
+    assert env.spec.max_episode_steps == d5rl.get_spec(task).max_episode_steps
+    env.close()
+    cols = [d5rl.envs.kitchen.subtasks.SUBTASK_NAMES.index(t) for t in d5rl.envs.kitchen.subtasks.MIXED]
+    for i, ep in enumerate(md.iterate_episodes()):
+        done = np.asarray(ds.episode(i).arrays["infos/completed"])
+        assert ep.infos["completed"].shape == (len(done) + 1,) + done.shape[1:]  # the reset's row, then each step's
+        np.testing.assert_array_equal(ep.infos["completed"][1:], done)
+        # the task's score from the Minari file alone: target subtasks done at the episode's end
+        assert ep.infos["completed"][-1][cols].mean() == done[-1][cols].mean()

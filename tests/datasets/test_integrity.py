@@ -104,7 +104,7 @@ def test_generate_repairs_a_deleted_shard_as_verify_says(tmp_path, capsys):
     assert "d5rl generate test-repair-v0" in capsys.readouterr().err
     assert cli_main(["generate", spec.id, "--episodes", "8"]) == 0
     err = capsys.readouterr().err
-    assert "repairing 2 damaged or missing shard(s)" in err and "shard-00001" in err and "shard-00002" in err
+    assert "repairing 2 damaged or missing part(s)" in err and "shard-00001" in err and "shard-00002" in err
     assert verify_dataset(spec).ok
     assert tree_digest(root) == before  # the same bytes as before the damage
 
@@ -158,7 +158,7 @@ def test_two_writers_committing_one_shard(tmp_path):
             w = fmt.ShardWriter(root / "shards", 0)
             w.write("x", np.full(1000, value, np.int64))
             barrier.wait(timeout=10)
-            w.commit({"episodes": [0, 1]}, {"x": "transition"})
+            w.commit({"episodes": [0, 1], "episode_lengths": [1000], "episode_meta": [{}]}, {"x": "transition"})
         except Exception as e:  # noqa: BLE001
             errors.append(e)
 
@@ -242,3 +242,109 @@ def test_digest_helper_ignores_bookkeeping(tmp_path):
     (tmp_path / ".write.lock").write_text("123")
     (tmp_path / "a.npy").write_bytes(b"x")
     assert tree_digest(tmp_path) == {"a.npy": hashlib.sha256(b"x").hexdigest()}
+
+
+# --- manifest and shard-record damage: the command the hint names repairs it ---------------------------------
+def _edit_json(path: Path, edit) -> None:
+    data = json.loads(path.read_text())
+    edit(data)
+    path.write_text(json.dumps(data))
+
+
+def _flip_digit(s: str) -> str:
+    return ("1" if s[0] != "1" else "2") + s[1:]
+
+
+def _repairs_as_the_hint_says(spec, root, before, capsys, match):
+    with pytest.raises(DatasetCorruptError, match=match) as e:
+        load_dataset(spec, generate=False)
+    assert f"d5rl generate {spec.id}" in str(e.value.hint)
+    capsys.readouterr()
+    assert cli_main(["generate", spec.id]) == 0
+    assert "repairing" in capsys.readouterr().err
+    assert tree_digest(root) == before
+    load_dataset(spec, generate=False)
+
+
+@pytest.mark.parametrize("damage", ["manifest-sha", "record-and-array", "garbage", "num_episodes-str", "not-object",
+                                    "shards-missing"])
+def test_damaged_manifest_or_record_is_repaired_by_the_command_the_hint_names(damage, capsys):
+    spec = register_toy(f"mdmg-{damage.replace('_', '')}", num_episodes=12, per_shard=4)
+    root = generate(spec, progress=False)
+    before = tree_digest(root)
+    manifest, shard = root / "manifest.json", root / "shards/shard-00001"
+    if damage == "manifest-sha":  # the manifest is the damaged copy
+        _edit_json(manifest, lambda m: m["shards"][1]["arrays"]["actions"].update(
+            sha256=_flip_digit(m["shards"][1]["arrays"]["actions"]["sha256"])))
+        match = "does not match the manifest"
+    elif damage == "record-and-array":  # an array changed and its record made to agree: the manifest is right
+        flip(shard / "actions.npy")
+        _edit_json(shard / "shard.json", lambda r: r["arrays"]["actions"].update(sha256=fmt.sha256_file(
+            shard / "actions.npy")))
+        match = "does not match the manifest"
+    elif damage == "garbage":
+        manifest.write_bytes(b"\x00garbage{")
+        match = "not valid JSON"
+    elif damage == "num_episodes-str":
+        _edit_json(manifest, lambda m: m.update(num_episodes="12"))
+        match = r"num_episodes is '12', expected a non-negative integer"
+    elif damage == "not-object":
+        manifest.write_text("[1, 2]")
+        match = "expected a JSON object"
+    else:
+        _edit_json(manifest, lambda m: m.pop("shards"))
+        match = "shards is None, expected a list of shards"
+    _repairs_as_the_hint_says(spec, root, before, capsys, match)
+
+
+@pytest.mark.parametrize("field, value, match", [
+    ("arrays", [1, 2], "arrays is \\[1, 2\\], expected an object of arrays"),
+    ("episode_lengths", ["4"], "episode_lengths is \\['4'\\], expected 4 positive integers"),
+    ("episodes", "0-4", "episodes is '0-4'"),
+    ("file", "../../manifest.json", "file is '../../manifest.json', expected a file name inside the shard"),
+])
+def test_wrong_types_in_a_shard_record_are_one_line_errors_and_generate_repairs_them(field, value, match, capsys):
+    spec = register_toy(f"rtyp-{field.replace('_', '')}", num_episodes=8, per_shard=4)
+    root = generate(spec, progress=False)
+    before = tree_digest(root)
+    shard = root / "shards/shard-00000"
+    if field == "file":
+        _edit_json(shard / "shard.json", lambda r: r["arrays"]["actions"].update(file=value))
+    else:
+        _edit_json(shard / "shard.json", lambda r: r.update({field: value}))
+    with pytest.raises(DatasetCorruptError, match=match):
+        fmt.read_shard_record(shard)
+    with pytest.raises(DatasetCorruptError):
+        load_dataset(spec, generate=False)
+    assert cli_main(["generate", spec.id]) == 0
+    assert tree_digest(root) == before
+
+
+def test_deeply_nested_json_is_a_one_line_error(tmp_path):
+    spec = register_toy("deep", num_episodes=4, per_shard=4)
+    root = generate(spec, progress=False)
+    (root / "manifest.json").write_text("[" * 200_000 + "]" * 200_000)
+    with pytest.raises(DatasetCorruptError, match="nests too deeply"):
+        load_dataset(spec, generate=False)
+    assert cli_main(["generate", spec.id]) == 0
+    load_dataset(spec, generate=False)
+
+
+@pytest.mark.parametrize("kind", ["fifo", "dev-zero", "huge"])
+def test_dataset_json_that_is_not_a_bounded_regular_file_is_refused_without_reading(kind):
+    spec = register_toy(f"bound-{kind}", num_episodes=4, per_shard=4)
+    root = generate(spec, progress=False)
+    manifest = root / "manifest.json"
+    manifest.unlink()
+    if kind == "fifo":
+        os.mkfifo(manifest)  # opening it for reading would block until a writer came
+        match = "is a FIFO, not a regular file"
+    elif kind == "dev-zero":
+        manifest.symlink_to("/dev/zero")
+        match = "is a character device, not a regular file"
+    else:
+        with open(manifest, "wb") as f:
+            f.truncate(fmt.JSON_MAX_BYTES + 1)  # sparse: no disk used
+        match = "more than the"
+    with pytest.raises(DatasetCorruptError, match=match):
+        load_dataset(spec, generate=False)

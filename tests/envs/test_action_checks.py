@@ -27,6 +27,8 @@ def test_bad_actions_and_step_before_reset(task):
             env.step(bad)
     with pytest.raises(ActionError, match="shape"):
         env.step(np.zeros(shape[0] + 1, np.float32))
+    with pytest.raises(ActionError, match="complex values"):
+        env.step(np.zeros(shape, np.complex64) + 0.5j)
     np.testing.assert_array_equal(env.unwrapped.get_state(), state)  # nothing was simulated
     # finite values outside [-1, 1] are clipped: the same step as the bound itself
     big = env.step(np.full(shape, 7.0, np.float32))[0]

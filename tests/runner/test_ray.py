@@ -73,3 +73,17 @@ def test_missing_ray_gives_a_clear_error(monkeypatch):
     with pytest.raises(MissingDependencyError, match="needs the `ray` package") as e:
         import_ray()
     assert "pip install" in e.value.hint
+
+
+def test_a_ray_client_address_without_ray_client_gives_a_clear_error(monkeypatch):
+    from d5rl.errors import MissingDependencyError
+    from d5rl.parallel import connect_ray
+
+    def init(address=None, **kw):  # what ray.init says for ray:// when `ray[client]` is not installed
+        raise ValueError("Ray Client requires pip package `ray[client]`. If you installed the minimal Ray ...")
+
+    monkeypatch.setattr(ray, "is_initialized", lambda: False)
+    monkeypatch.setattr(ray, "init", init)
+    with pytest.raises(MissingDependencyError, match="connects through Ray Client, which is not installed") as e:
+        connect_ray("ray://head:10001")
+    assert "ray[client]" in e.value.hint

@@ -159,3 +159,117 @@ def test_a_fresh_start_drops_the_metrics_of_a_killed_attempt_without_checkpoint(
     train("bc", "toy-reach-v0", 8, 0, 0, SMALL, run, dataset=toy_dataset(10))
     rows = [json.loads(line) for line in (run / "metrics.jsonl").read_text().splitlines()]
     assert rows and all(r["step"] <= 8 and "stale/loss" not in r for r in rows)
+
+
+# --- bounded reads and wrong types: one line, nothing read beyond what the manifest declares ------------------
+def _one_checkpoint(tmp_path, buffer=None):
+    save_checkpoint(tmp_path, Checkpoint(b"agent-1" * 10, {"step": 1}, buffer))
+    return tmp_path / "checkpoint"
+
+
+def _manifest_edit(d, edit):
+    m = json.loads((d / "manifest.json").read_text())
+    edit(m)
+    (d / "manifest.json").write_text(json.dumps(m))
+
+
+@pytest.mark.parametrize("kind, match", [("dev-zero", "is a character device, not a regular file"),
+                                         ("fifo", "is a FIFO, not a regular file"),
+                                         ("bigger", "more than the 70 it can be")])
+def test_a_checkpoint_file_that_is_not_a_bounded_regular_file_is_refused_before_reading(tmp_path, kind, match):
+    d = _one_checkpoint(tmp_path)
+    target = d / "agent.msgpack"
+    target.unlink()
+    if kind == "dev-zero":
+        target.symlink_to("/dev/zero")  # read whole, this is a MemoryError
+    elif kind == "fifo":
+        os.mkfifo(target)  # read, this blocks forever
+    else:
+        with open(target, "wb") as f:
+            f.truncate(8 << 30)  # sparse: 8 GB declared by the file, 70 bytes by the manifest
+    with pytest.raises(CheckpointError, match=match) as e:
+        read_checkpoint(d)
+    assert "\n" not in str(e.value)
+
+
+def _npz_with(member: bytes, name="obs.npy", compress=False) -> bytes:
+    import io
+    import zipfile
+
+    bio = io.BytesIO()
+    with zipfile.ZipFile(bio, "w", zipfile.ZIP_DEFLATED if compress else zipfile.ZIP_STORED) as z:
+        z.writestr(name, member)
+    return bio.getvalue()
+
+
+def _npy_header(shape, dtype="<f4") -> bytes:
+    import io
+
+    bio = io.BytesIO()
+    np.lib.format.write_array_header_1_0(bio, {"descr": dtype, "fortran_order": False, "shape": shape})
+    return bio.getvalue()
+
+
+@pytest.mark.parametrize("kind, match", [
+    ("zip-bomb", "compressed, or larger than the archive"),
+    ("huge-header", r"declares shape \(3000000000000,\)"),
+    ("objects", "np.savez does not write|holds Python objects|unreadable"),
+])
+def test_a_crafted_buffer_npz_is_refused_before_allocating(tmp_path, kind, match):
+    import hashlib
+
+    if kind == "zip-bomb":  # 2 MB of zeros deflate to ~2 kB; 8 GB would deflate to a few MB
+        blob = _npz_with(_npy_header((512 * 1024,)) + bytes(2 << 20), compress=True)
+    elif kind == "huge-header":
+        blob = _npz_with(_npy_header((3 * 10**12,)) + bytes(64))
+    else:
+        blob = _npz_with(_npy_header((1,), "|O") + b"\x80\x04N.")
+    d = _one_checkpoint(tmp_path, {"meta": np.array([1, 0, 4])})
+    (d / "buffer.npz").write_bytes(blob)
+    _manifest_edit(d, lambda m: m["files"]["buffer.npz"].update(bytes=len(blob),
+                                                                 sha256=hashlib.sha256(blob).hexdigest()))
+    with pytest.raises(CheckpointError, match=match):
+        read_checkpoint(d)
+
+
+@pytest.mark.parametrize("edit, match", [
+    (lambda m: m.update(files=["agent.msgpack"]), r"files is \['agent.msgpack'\], expected an object"),
+    (lambda m: m["files"].update({"agent.msgpack": "70"}), "expected an object with the file's bytes and sha256"),
+    (lambda m: m["files"]["agent.msgpack"].update(bytes="70"), "expected an object with the file's bytes"),
+])
+def test_wrong_types_in_a_checkpoint_manifest_are_one_line_errors(tmp_path, edit, match):
+    d = _one_checkpoint(tmp_path)
+    _manifest_edit(d, edit)
+    with pytest.raises(CheckpointError, match=match):
+        read_checkpoint(d)
+
+
+def test_a_deeply_nested_checkpoint_manifest_is_a_one_line_error(tmp_path):
+    d = _one_checkpoint(tmp_path)
+    (d / "manifest.json").write_text("[" * 200_000 + "]" * 200_000)
+    with pytest.raises(CheckpointError, match="nests too deeply"):
+        read_checkpoint(d)
+
+
+@pytest.mark.parametrize("field, value, match", [("step", "abc", "step is 'abc', expected a non-negative integer"),
+                                                 ("rng", {"state": 1}, "rng is .*expected the state of numpy"),
+                                                 ("metric_sums", [1], "metric_sums is \\[1\\]")])
+def test_wrong_types_in_a_run_state_are_one_line_errors(tmp_path, field, value, match):
+    from d5rl.training.checkpoint import check_state
+    from d5rl.training.parts import RunState
+
+    good = RunState(np.random.default_rng(0), step=3).to_json()
+    assert check_state(good, tmp_path) is good
+    with pytest.raises(CheckpointError, match=match):
+        check_state({**good, field: value}, tmp_path / "state.json")
+
+
+@pytest.mark.parametrize("text, match", [("{", "not valid JSON"), ('{"algo": 3}', "algo is 3, expected an algorithm"),
+                                         ("[]", "expected a JSON object")])
+def test_a_broken_run_config_is_a_one_line_error_under_eval(tmp_path, text, match):
+    from d5rl.cli import main as cli_main
+
+    (tmp_path / "config.json").write_text(text)
+    with pytest.raises(Exception, match=match):
+        load_run(tmp_path)
+    assert cli_main(["eval", str(tmp_path)]) != 0

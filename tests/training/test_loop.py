@@ -97,3 +97,43 @@ def test_the_run_records_the_dataset_it_trains_on(tmp_path):
     # in-memory data (no generated dataset behind it) records nothing
     train("bc", "toy-reach-v0", 8, 0, 0, overrides(), tmp_path / "m", dataset=toy_dataset(5))
     assert "dataset" not in json.loads((tmp_path / "m" / "config.json").read_text())
+
+
+@pytest.mark.parametrize("setting", ["hidden_dims=1000000000", "batch_size=1000000000",
+                                     "hidden_dims=100000,100000,100000"])
+def test_networks_or_batches_too_big_for_memory_fail_in_one_line_before_anything_is_written(tmp_path, setting):
+    from d5rl.agents.config import ConfigError
+    from d5rl.training.loop import available_memory
+
+    assert available_memory() is not None
+    with pytest.raises(ConfigError, match=r"need at least [\d,.]+ GiB; [\d,.]+ GiB are available") as e:
+        train("td3bc", "toy-reach-v0", 8, 0, 0, overrides(**dict([setting.split("=")])), tmp_path / "run",
+              dataset=toy_dataset(4))
+    assert "\n" not in str(e.value)
+    assert not (tmp_path / "run").exists()
+
+
+def test_the_memory_floor_counts_each_network_once_as_float32_with_adam():
+    from d5rl.agents.config import Config
+    from d5rl.training.loop import memory_floor
+
+    example = {"observations": np.zeros((1, 3), np.float32), "actions": np.zeros((1, 2), np.float32)}
+    cfg = Config({"batch_size": 10, "hidden_dims": (4, 5)})
+    widths = [3 + 2, 4, 5, 1]
+    params = (5 * 4 + 4) + (4 * 5 + 5) + (5 * 1 + 1)
+    assert memory_floor(cfg, example) == 10 * 4 * 2 * 5 + 16 * params + 4 * 10 * max(widths)
+
+
+def test_a_full_disk_under_the_run_dir_is_named_as_the_run_dirs(tmp_path, monkeypatch):
+    import errno
+
+    from d5rl.errors import D5RLError
+    from d5rl.training import loop
+
+    def full(*args, **kwargs):
+        raise OSError(errno.ENOSPC, "No space left on device")
+
+    monkeypatch.setattr(loop, "_write_config", full)  # the run's first write
+    with pytest.raises(D5RLError, match=f"the disk holding {tmp_path / 'run'} is full") as e:
+        train("td3bc", "toy-reach-v0", 8, 0, 0, overrides(), tmp_path / "run", dataset=toy_dataset(4))
+    assert "--run-dir" in e.value.hint and "D5RL_HOME" not in e.value.hint

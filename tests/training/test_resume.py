@@ -163,3 +163,36 @@ def test_a_run_killed_in_its_final_evaluation_resumes_it(tmp_path, monkeypatch, 
     drop = ("run_dir", "run_wall_s", "resumed", "agent")
     assert {k: v for k, v in resumed.items() if k not in drop} == {k: v for k, v in full.items() if k not in drop}
     assert rows(tmp_path / "a") == rows(tmp_path / "b") and not (tmp_path / "b" / "eval_progress.json").exists()
+
+
+def test_a_second_train_into_a_live_run_dir_fails_in_one_line_and_a_finished_run_is_not_evaluated_twice(tmp_path):
+    import subprocess
+    import sys
+
+    from d5rl.training.checkpoint import RUN_LOCK
+    from d5rl.training.loop import RunDirError
+
+    ds, kw = toy_dataset(10), overrides(checkpoint_interval=16, eval_interval=1000, updates_per_call=8)
+    run_dir = tmp_path / "run"
+    run_dir.mkdir()
+    # another process holds the run directory (as a live `d5rl train` does for its whole run)
+    holder = subprocess.Popen([sys.executable, "-c", "import fcntl, os, sys, time\n"
+                               f"fd = os.open({str(run_dir / RUN_LOCK)!r}, os.O_RDWR | os.O_CREAT)\n"
+                               "fcntl.flock(fd, fcntl.LOCK_EX); os.write(fd, f'{os.getpid()}\\n'.encode())\n"
+                               "print('held', flush=True); time.sleep(60)"], stdout=subprocess.PIPE, text=True)
+    try:
+        assert holder.stdout.readline().strip() == "held"
+        with pytest.raises(RunDirError, match=f"another d5rl process \\(pid {holder.pid}\\) is training into"):
+            train("td3bc", "toy-reach-v0", 32, 0, 0, kw, run_dir, dataset=ds)
+        assert not (run_dir / "checkpoint").exists()
+    finally:
+        holder.kill()
+        holder.wait()
+    done = train("td3bc", "toy-reach-v0", 32, 0, 0, kw, run_dir, dataset=ds)
+    before = rows(run_dir)
+    again = train("td3bc", "toy-reach-v0", 32, 0, 0, kw, run_dir, dataset=ds)
+    assert rows(run_dir) == before  # no second final evaluation row
+    assert sum(1 for r in before if any(k.startswith("eval/") for k in r)) == 1
+    assert again["return"] == done["return"] and again["step"] == 32
+    for a, b in zip(leaves(done["agent"]), leaves(again["agent"])):
+        np.testing.assert_array_equal(a, b)

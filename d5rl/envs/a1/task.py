@@ -73,6 +73,8 @@ class A1Env(MujocoEnv):
         heading_change_steps: int = 100,
         render_mode: str | None = None,
         render_size: tuple[int, int] = (240, 320),
+        width: int | None = None,
+        height: int | None = None,
     ):
         if terrain not in ("flat", "course"):
             raise ValueError(f"terrain must be 'flat' or 'course', got {terrain!r}")
@@ -82,13 +84,13 @@ class A1Env(MujocoEnv):
             raise ValueError("command='waypoints' needs terrain='course'")
         self.course = Course(seed=course_seed) if terrain == "course" else None
         super().__init__(build_model(self.course), frame_skip=round(CONTROL_DT / PHYSICS_DT),
-                         render_mode=render_mode, render_size=render_size, render_camera="track")
+                         render_mode=render_mode, render_size=render_size, render_camera="track", width=width, height=height)
         self.target_speed = float(target_speed)
         self.command = command
         self.heading_change_steps = int(heading_change_steps)
         self.energy_coef = rewards.ENERGY_COEF if command == "forward" else rewards.HIKING_ENERGY_COEF
         self.idx = Indices.of(self.model)
-        self._home = self.model.key("home")
+        self._home = self.model.key("home").id  # an id, not a keyframe view: the env pickles and deep-copies
         obs_dim = 58 + (2 if command != "forward" else 0)
         self.observation_space = gym.spaces.Box(-np.inf, np.inf, (obs_dim,), np.float32)
         self.action_space = gym.spaces.Box(-1.0, 1.0, (12,), np.float32)
@@ -142,7 +144,7 @@ class A1Env(MujocoEnv):
     def reset(self, *, seed: int | None = None, options: dict | None = None):
         super().reset(seed=seed)
         rng = self.np_random
-        mujoco.mj_resetDataKeyframe(self.model, self.data, self._home.id)
+        mujoco.mj_resetDataKeyframe(self.model, self.data, self._home)
         self.data.qpos[self.idx.qpos_joints] += rng.uniform(-0.05, 0.05, 12)
         yaw = rng.uniform(-0.1, 0.1)
         if self.course is not None:

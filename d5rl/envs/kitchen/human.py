@@ -121,11 +121,40 @@ def _episode_bounds(terminals: np.ndarray, timeouts: np.ndarray, n: int) -> list
     return bounds
 
 
+# The kitchen's files are uncompressed float data (D4RL's ~30 MB); an array may declare at most this many
+# times the file's size before it is read, so a few kB claiming gigabytes are refused rather than allocated.
+MAX_EXPANSION = 16
+MAX_ABS = 1e3  # joint positions (rad, m) and actions of the kitchen are a few units at most
+
+
+def _read(group, key: str, path: Path, where: str, kinds: str, ndim: int, hint: str, dtype=None) -> np.ndarray:
+    """``group[key]`` as an array, after checking its kind, dimensions and declared size (nothing read before)."""
+    d = group[key]
+    if not isinstance(d, _h5py().Dataset):
+        raise D5RLError(f"{where}: {key} is not an array", hint)
+    if d.dtype.kind not in kinds:
+        raise D5RLError(f"{where}: {key} holds {d.dtype} values, not numbers", hint)
+    if len(d.shape) != ndim:
+        raise D5RLError(f"{where}: {key} has shape {d.shape}, expected {ndim} dimension(s)", hint)
+    declared, size = int(np.prod(d.shape, dtype=np.float64)) * d.dtype.itemsize, path.stat().st_size
+    if declared > MAX_EXPANSION * size + (1 << 20):
+        raise D5RLError(f"{where}: {key} declares shape {d.shape} ({declared / 2**20:,.0f} MiB) in a file of "
+                        f"{size / 2**20:,.1f} MiB", hint)
+    return np.asarray(d, dtype)
+
+
 def _finite(path: Path, name: str, arr: np.ndarray, hint: str, offset: int = 0) -> None:
-    bad = ~np.isfinite(np.asarray(arr, np.float64))
+    a = np.asarray(arr, np.float64)
+    bad = ~np.isfinite(a)
     if bad.any():
         row = int(np.flatnonzero(bad.reshape(len(bad), -1).any(axis=1))[0]) + offset
         raise D5RLError(f"{path}: {name} has {int(bad.sum())} NaN or infinite values (first in row {row})", hint)
+    big = np.abs(a) > MAX_ABS
+    if big.any():
+        row = int(np.flatnonzero(big.reshape(len(big), -1).any(axis=1))[0])
+        raise D5RLError(f"{path}: {name} has values beyond ±{MAX_ABS:g} (first in row {row + offset}: "
+                        f"{a.reshape(len(a), -1)[row][big.reshape(len(big), -1)[row]][0]:g}), which no kitchen joint "
+                        "or action reaches", hint)
 
 
 def read_d4rl(path: Path, subtask_idx: dict[str, np.ndarray]) -> list[SourceEpisode]:
@@ -138,11 +167,11 @@ def read_d4rl(path: Path, subtask_idx: dict[str, np.ndarray]) -> list[SourceEpis
         for key in ("observations", "actions"):
             if key not in f:
                 raise D5RLError(f"{path} has no {key!r} array", hint)
-        obs = np.asarray(f["observations"], np.float64)
-        actions = np.asarray(f["actions"], np.float32)
+        obs = _read(f, "observations", path, str(path), "fiu", 2, hint, np.float64)
+        actions = _read(f, "actions", path, str(path), "fiu", 2, hint, np.float32)
         n = len(obs)
-        terminals = np.asarray(f["terminals"]) if "terminals" in f else np.zeros(n, bool)
-        timeouts = np.asarray(f["timeouts"]) if "timeouts" in f else np.zeros(n, bool)
+        terminals = _read(f, "terminals", path, str(path), "biuf", 1, hint) if "terminals" in f else np.zeros(n, bool)
+        timeouts = _read(f, "timeouts", path, str(path), "biuf", 1, hint) if "timeouts" in f else np.zeros(n, bool)
     if obs.ndim != 2 or obs.shape[1] != 60:
         raise D5RLError(f"{path}: observations have shape {obs.shape}, expected (N, 60)", hint)
     if n < 2:
@@ -163,6 +192,9 @@ def read_d4rl(path: Path, subtask_idx: dict[str, np.ndarray]) -> list[SourceEpis
         claimed = {name: np.linalg.norm(qpos[1:, idx] - goal[1:, idx], axis=-1) < THRESHOLD
                    for name, idx in subtask_idx.items() if np.any(goal[0, idx] != 0)}
         episodes.append(SourceEpisode(qpos, None, actions[a : b - 1], claimed, {"source_rows": [int(a), int(b)]}))
+    if not episodes:
+        raise D5RLError(f"{path}: no episode has 2 or more rows (every row ends one), so there is no transition",
+                        hint)
     return episodes
 
 
@@ -183,8 +215,8 @@ def read_minari(path: Path, subtask_idx: dict[str, np.ndarray]) -> list[SourceEp
             for key in ("observations/observation", "actions"):
                 if key not in g:
                     raise D5RLError(f"{where} has no {key!r}", hint)
-            obs = np.asarray(g["observations/observation"], np.float64)
-            actions = np.asarray(g["actions"], np.float32)
+            obs = _read(g, "observations/observation", path, where, "fiu", 2, hint, np.float64)
+            actions = _read(g, "actions", path, where, "fiu", 2, hint, np.float32)
             if obs.ndim != 2 or obs.shape[1] != 59:
                 raise D5RLError(f"{where}: observations/observation has shape {obs.shape}, expected (T+1, 59)", hint)
             if actions.shape != (len(obs) - 1, 9):
@@ -197,8 +229,8 @@ def read_minari(path: Path, subtask_idx: dict[str, np.ndarray]) -> list[SourceEp
             for task in g["observations/achieved_goal"].keys() if "observations/achieved_goal" in g else []:
                 if task not in subtask_idx:
                     continue
-                achieved = np.asarray(g[f"observations/achieved_goal/{task}"], np.float64)
-                desired = np.asarray(g[f"observations/desired_goal/{task}"], np.float64)
+                achieved = _read(g, f"observations/achieved_goal/{task}", path, where, "fiu", 2, hint, np.float64)
+                desired = _read(g, f"observations/desired_goal/{task}", path, where, "fiu", 2, hint, np.float64)
                 if achieved.shape != (len(obs), len(subtask_idx[task])):
                     raise D5RLError(f"{where}: achieved_goal/{task} has shape {achieved.shape}, expected "
                                     f"({len(obs)}, {len(subtask_idx[task])})", hint)

@@ -85,6 +85,8 @@ class KitchenEnv(MujocoEnv):
         render_size: tuple[int, int] = (240, 320),
         scene_options: km.SceneOptions | None = None,
         model: mujoco.MjModel | None = None,
+        width: int | None = None,
+        height: int | None = None,
     ):
         from d5rl.errors import D5RLError
 
@@ -95,7 +97,8 @@ class KitchenEnv(MujocoEnv):
             raise D5RLError(f"obs_mode must be one of {OBS_MODES}, got {obs_mode!r}", "use 'pixels' or 'state'")
         if model is None:
             model = km.build_model(scene_options or km.SceneOptions())
-        super().__init__(model, FRAME_SKIP, render_mode=render_mode, render_size=render_size, render_camera="overview")
+        super().__init__(model, FRAME_SKIP, render_mode=render_mode, render_size=render_size, render_camera="overview",
+                         width=width, height=height)
         self.tasks = tuple(tasks)
         self.obs_mode = obs_mode
         self.image_size = int(image_size)

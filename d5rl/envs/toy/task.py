@@ -23,9 +23,16 @@ CAMERAS = ("front", "side")
 class ToyReachEnv(gym.Env):
     metadata = {"render_modes": ["rgb_array"], "render_fps": 10}
 
-    def __init__(self, pixels: bool = False, render_mode: str | None = None):
+    def __init__(self, pixels: bool = False, render_mode: str | None = None,
+                 render_size: tuple[int, int] = (8 * IMG, 8 * IMG), width: int | None = None,
+                 height: int | None = None):
+        from d5rl.envs.base import frame_size
+
+        if render_mode is not None and render_mode not in self.metadata["render_modes"]:
+            raise ValueError(f"render_mode must be one of {self.metadata['render_modes']}, got {render_mode!r}")
         self.pixels = pixels
         self.render_mode = render_mode
+        self.render_size = frame_size(render_size, width, height)
         self.action_space = gym.spaces.Box(-1.0, 1.0, (2,), np.float32)
         state_space = gym.spaces.Box(-2.0, 2.0, (4,), np.float32)
         if pixels:
@@ -72,4 +79,8 @@ class ToyReachEnv(gym.Env):
         return self._obs(), reward, False, self.t >= HORIZON, {"success": dist < 0.1}
 
     def render(self):
-        return np.kron(self._image(False), np.ones((8, 8, 1), np.uint8))
+        if self.render_mode is None:  # as every family and Gymnasium's own envs
+            gym.logger.warn("render() called without render_mode; pass render_mode='rgb_array'")
+            return None
+        h, w = self.render_size  # the front camera's cells, scaled by nearest neighbour
+        return self._image(False)[np.arange(h) * IMG // h][:, np.arange(w) * IMG // w]

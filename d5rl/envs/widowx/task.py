@@ -105,12 +105,16 @@ class WidowXSortingEnv(MujocoEnv):
         max_delta: float = 0.03,
         max_yaw_delta: float = 0.25,
         render_mode: str | None = None,
+        render_size: tuple[int, int] | None = None,
+        width: int | None = None,
+        height: int | None = None,
     ):
         if obs_mode not in ("pixels", "state"):
             raise ValueError(f"obs_mode must be 'pixels' or 'state', got {obs_mode!r}")
         model = wm.load_model()
-        super().__init__(model, FRAME_SKIP, render_mode=render_mode, render_size=(image_size, image_size),
-                         render_camera="side")
+        super().__init__(model, FRAME_SKIP, render_mode=render_mode,
+                         render_size=render_size or (image_size, image_size), render_camera="side", width=width,
+                         height=height)
         self.obs_mode = obs_mode
         self.image_size = int(image_size)
         self.randomize = bool(randomize)

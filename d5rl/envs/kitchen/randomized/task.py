@@ -57,7 +57,8 @@ class RandomizedKitchenEnv(KitchenEnv):
 
     def __init__(self, tasks: Sequence[str] = MIXED, obs_mode: str = "pixels", image_size: int = 128,
                  cameras: Sequence[str] = CAMERAS, init_noise: float = 0.05, render_mode: str | None = None,
-                 render_size: tuple[int, int] = (240, 320), domain: Domain | None = None, quality: str = "fast"):
+                 render_size: tuple[int, int] = (240, 320), domain: Domain | None = None, quality: str = "fast",
+                 width: int | None = None, height: int | None = None):
         from d5rl.errors import D5RLError
 
         if quality not in QUALITIES:
@@ -67,7 +68,8 @@ class RandomizedKitchenEnv(KitchenEnv):
         first = domain or Domain.sample(np.random.default_rng(0))
         model = compiled_variant(*first.key, quality)
         super().__init__(tasks=tasks, obs_mode=obs_mode, image_size=image_size, cameras=cameras,
-                         init_noise=init_noise, render_mode=render_mode, render_size=render_size, model=model)
+                         init_noise=init_noise, render_mode=render_mode, render_size=render_size, model=model,
+                         width=width, height=height)
         self._fixed_domain = domain
         self._variants: dict[tuple, tuple] = {}
         self.domain = first
@@ -96,6 +98,10 @@ class RandomizedKitchenEnv(KitchenEnv):
             sync_materials(r, self.model)
         self.domain = domain
         self.grasp_plans = grasp_plans(domain)
+
+    def __getstate__(self) -> dict:
+        # the variants visited keep renderers too (see set_domain); a copy keeps only the current one's model
+        return {**super().__getstate__(), "_variants": {}}
 
     def reset(self, *, seed: int | None = None, options: dict | None = None):
         if seed is not None:
