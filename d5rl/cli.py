@@ -135,7 +135,7 @@ def _parse_size(text: str) -> tuple[int, int]:
 def cmd_render(args) -> int:
     from d5rl.progress import progress_bar
 
-    from d5rl.registry import get_spec, make_env
+    from d5rl.registry import get_spec, make_env, make_replay_env
     from d5rl.video import check_video_path, replay_frames, rollout_frames, write_video
 
     spec = get_spec(args.task)
@@ -165,10 +165,12 @@ def cmd_render(args) -> int:
             raise D5RLError(f"{args.task}'s dataset stores no simulator states to replay")
         states = ep.arrays["states"][: None if args.steps is None else args.steps + 1]
         total, desc = len(states), f"render {args.task} episode {args.episode}"
+        meta = ep.meta
     else:
         states, desc = None, f"render {args.task} (random actions)"
         total = (spec.max_episode_steps if args.steps is None else args.steps) + 1
-    env = make_env(args.task, render_mode="rgb_array")
+    env = (make_replay_env(args.task, meta, render_mode="rgb_array") if states is not None
+           else make_env(args.task, render_mode="rgb_array"))
     try:
         frames = (replay_frames(env, states, args.size, args.quality) if states is not None
                   else rollout_frames(env, total - 1, args.seed, args.size, args.quality))

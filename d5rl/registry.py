@@ -89,6 +89,10 @@ class DatasetSpec:
     # Not part of the dataset's identity: a dataset adopts "portable" at a new version unless its bytes
     # do not change.
     numerics: str = "native"
+    # "module:function" (task spec, an episode's meta, env kwargs) -> the env to replay that episode's stored
+    # states in, when the task's own env would not show them as they happened (a scene drawn per episode:
+    # the A1 v1 floors); None: the task's env (make_env).  Used by `d5rl render --episode` and the browser.
+    replay: str | None = None
 
 
 @dataclasses.dataclass(frozen=True)
@@ -274,6 +278,14 @@ def make_env(task_id: str, **kwargs: Any):
     env_cls: Callable = resolve(spec.entry_point)
     env = env_cls(**{**spec.env_kwargs, **kwargs})
     return gymnasium.wrappers.TimeLimit(env, max_episode_steps=spec.max_episode_steps)
+
+
+def make_replay_env(task_id: str, meta: dict, **kwargs: Any):
+    """The env that shows a stored episode of the task's dataset as it happened (``DatasetSpec.replay``)."""
+    spec = get_spec(task_id)
+    if spec.dataset is None or spec.dataset.replay is None:
+        return make_env(spec.id, **kwargs)
+    return resolve(spec.dataset.replay)(spec, meta, **kwargs)
 
 
 def episode_score(task_id: str, episode_return: float, final_info: dict) -> float:

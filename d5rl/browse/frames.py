@@ -193,10 +193,10 @@ def render_states(spec, states: np.ndarray, meta: dict) -> dict[str, np.ndarray]
         render_episode = getattr(importlib.import_module(derived.partition(":")[0]), "render_episode", None)
         if render_episode is not None:
             return render_episode({"states": np.asarray(states)}, meta)
-    from d5rl.registry import make_env
+    from d5rl.registry import make_replay_env
     from d5rl.video import replay_frames
 
-    env = make_env(spec.id, render_mode="rgb_array")
+    env = make_replay_env(spec.id, meta, render_mode="rgb_array")
     try:
         if not hasattr(env.unwrapped, "set_state"):
             raise NoFrames(f"{spec.id}'s environment cannot replay stored states")

@@ -1,17 +1,20 @@
 """The A1 agents: what each is trained to do and what it is for (light: no JAX, no MuJoCo at import).
 
 Data agents' replay buffers are the A1 datasets; reference agents define score references.
-Training: :mod:`d5rl.envs.a1.experts`; their policies live in ``policies/<agent>/``.
+Training: :mod:`d5rl.envs.a1.experts`; their policies live in ``policies/<agent>/``, or under
+``$D5RL_A1_POLICIES/<agent>/`` when that variable is set (read at import; worker processes inherit it):
+datasets, calibration and checks then use those policies, e.g. trained ones before they are published.
 """
 
 from __future__ import annotations
 
 import dataclasses
+import os
 from pathlib import Path
 
 from d5rl.envs.a1 import rewards
 
-POLICY_DIR = Path(__file__).with_name("policies")
+POLICY_DIR = Path(os.environ.get("D5RL_A1_POLICIES") or Path(__file__).with_name("policies"))
 EPISODE_STEPS = 400
 
 
@@ -77,7 +80,8 @@ def describe(agent: str, policy_dir: Path = POLICY_DIR) -> str:
     return f"SAC, {steps:,} steps, tracking {spec.target_speed} m/s {where}"
 
 
-def make_env(agent: str):
+def make_env(agent: str, **kwargs):
+    """The env ``agent`` trains and collects data in (``kwargs``: e.g. ``render_mode``)."""
     from d5rl.envs.a1.task import A1Env
 
     spec = AGENTS[agent]
@@ -85,8 +89,8 @@ def make_env(agent: str):
         from d5rl.envs.a1.v1 import A1EnvV1
 
         extra = {"floors": spec.floors} if spec.task == "run_toward" else {}
-        return A1EnvV1(task=spec.task, target_speed=spec.target_speed, **extra)
-    return A1Env(target_speed=spec.target_speed, terrain=spec.terrain, command=spec.command)
+        return A1EnvV1(task=spec.task, target_speed=spec.target_speed, **extra, **kwargs)
+    return A1Env(target_speed=spec.target_speed, terrain=spec.terrain, command=spec.command, **kwargs)
 
 
 def training_reward(spec: AgentSpec, info: dict) -> float:

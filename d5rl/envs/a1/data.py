@@ -7,6 +7,11 @@ snapshot and how many episodes each snapshot collected (``policies/<agent>/log.j
 Every training episode is re-collected by the snapshot that was acting then (uniform random actions before
 learning started), with the SAC policy's own sampling noise.  Per-step reward terms
 are stored in ``infos/*`` so each task relabels rewards for its own target.
+
+A v1 episode's scene is drawn at reset (RunToward: smooth or bumpy floor, its heights, the floor's
+friction, the trunk's mass, the goals; hiking: the course), so its ``meta`` keeps the env's reset seed
+(``reset_seed``) and :func:`replay_env` rebuilds the scene from it: stored states only make sense on
+the floor they were collected on.
 """
 
 from __future__ import annotations
@@ -51,7 +56,8 @@ class ReplayBufferGenerator:
             raise D5RLError(f"episode {index} is beyond the {len(self.table)} episodes of the A1 agents' buffers")
         agent, seg_i = self.table[index]
         env, policy = self._env(agent), self._policy(agent, seg_i)
-        obs, _ = env.reset(seed=int(rng.integers(2**31)))
+        reset_seed = int(rng.integers(2**31))
+        obs, _ = env.reset(seed=reset_seed)
         observations, states = [obs], [env.get_state()]
         actions, rews, terms = [], [], []
         infos = {k: [] for k in INFO_KEYS}
@@ -82,7 +88,26 @@ class ReplayBufferGenerator:
         seg = agent_log(agent)["segments"][seg_i]
         meta = {"agent": agent, "agent_target_speed": AGENTS[agent].target_speed, "segment": seg_i,
                 "snapshot": seg["snapshot"] or "random", "training_step": seg["start_step"]}
+        if AGENTS[agent].env_version == 1:  # v0's scenes are the same in every episode
+            meta["reset_seed"] = reset_seed
         return Episode(arrays, meta)
+
+
+def replay_env(spec, meta: dict, **kwargs):
+    """The env a stored v1 episode was collected in, showing that episode's scene (``DatasetSpec.replay``).
+
+    It is the data agent's env (a hiking episode was collected on RunToward's floors, not on the course)
+    reset with the episode's ``reset_seed``, which redraws the floor, its friction, the trunk's mass and
+    the first goal as they were; ``set_state`` then shows the stored states where they happened, and
+    :meth:`~d5rl.envs.a1.v1.A1EnvV1.replay_step` recomputes their observations.  ``kwargs`` go to the
+    env (e.g. ``render_mode``).
+    """
+    if "reset_seed" not in meta or meta.get("agent") not in AGENTS:
+        raise D5RLError(f"{spec.id}'s episode records no data agent and reset seed to rebuild its scene from",
+                        f"regenerate the dataset: d5rl generate {spec.id} --force")
+    env = make_env(meta["agent"], **kwargs)
+    env.reset(seed=int(meta["reset_seed"]))
+    return env
 
 
 def relabel_speed(spec, arrays) -> dict:

@@ -100,6 +100,8 @@ def _unavailable(agents: tuple[str, ...]) -> str | None:
     return "the v1 A1 data agents are not published yet; train them: " + TRAIN_V1.format(agents=" ".join(agents))
 
 
+# each episode's scene (floor, friction, mass, goals) is drawn at reset: replays rebuild it from the stored seed
+REPLAY_V1 = "d5rl.envs.a1.data:replay_env"
 LOCOMOTION_DATA_V1 = DatasetSpec(
     name="a1-v1-locomotion",
     version=1,
@@ -110,6 +112,8 @@ LOCOMOTION_DATA_V1 = DatasetSpec(
     description="replay buffers of three SAC agents trained on the release's run task to track 0.5, 0.8 "
                 "and 1.0 m/s, first exploration to expert, replayed from committed policy snapshots",
     unavailable=_unavailable(SPEED_AGENTS_V1),
+    numerics="portable",
+    replay=REPLAY_V1,
 )
 HIKING_DATA_V1 = DatasetSpec(
     name="a1-v1-hiking",
@@ -121,6 +125,8 @@ HIKING_DATA_V1 = DatasetSpec(
     description="replay buffer of a SAC agent running toward random goals (the release's RunToward: "
                 "smooth and bumpy floors)",
     unavailable=_unavailable(HIKING_AGENTS_V1),
+    numerics="portable",
+    replay=REPLAY_V1,
 )
 for task_id, speed in (("a1-walk-v1", 0.75), ("a1-run-v1", 1.25)):
     register(TaskSpec(

@@ -337,6 +337,16 @@ class A1EnvV1(MujocoEnv):
         """The reward of the current state and its terms (also stored in datasets for relabelling)."""
         return self.task.reward(self)
 
+    def replay_step(self, state: np.ndarray, action) -> np.ndarray:
+        """Observation at a stored ``state`` that ``action`` led to: the state is set and the task advances
+        as in :meth:`step` (a reached goal or waypoint makes way for the next, drawn from the env's
+        generator), so replaying an episode's states in order after a reset with its seed recomputes its
+        observations."""
+        self.set_state(state)
+        self._prev_action = self.check_action(action)
+        self.task.after_step(self, self.np_random)
+        return self._obs()
+
     def step(self, action):
         action = self.check_action(action)
         self.do_simulation(self.joint_targets(action))

@@ -1,0 +1,233 @@
+"""The A1 v1 data path, with stand-in published agents: random-weight actors in the snapshot format, in a
+temporary policy directory named by ``D5RL_A1_POLICIES`` (what the trained agents' ``publish`` ships).
+
+`d5rl generate`, `verify` and `calibrate` run in subprocesses that start with the variable (as a user
+checking trained agents before publishing them would); this process reads the same files through specs
+that point at them.
+"""
+
+import dataclasses
+import json
+import os
+import subprocess
+import sys
+from pathlib import Path
+
+import numpy as np
+import pytest
+
+import d5rl
+from d5rl.datasets.loading import load_dataset
+from d5rl.envs.a1 import arenas, v1
+from d5rl.envs.a1.agents import AGENTS
+from d5rl.envs.a1.data import replay_env
+from d5rl.envs.a1.policy import SnapshotPolicy, save_actor
+from d5rl.registry import make_env
+
+REPO = Path(__file__).resolve().parents[3]
+V1_AGENTS = [a for a, s in AGENTS.items() if s.env_version == 1]
+# per data agent: uniform random actions, then two snapshots (the training log's segments)
+SEGMENTS = [{"snapshot": None, "start_step": 0, "episodes": 2, "steps": 800},
+            {"snapshot": "snapshot-01.npz", "start_step": 800, "episodes": 1, "steps": 400},
+            {"snapshot": "snapshot-02.npz", "start_step": 1200, "episodes": 1, "steps": 400}]
+
+
+def _actor(rng: np.random.Generator, obs_dim: int, hidden=(32, 32)) -> dict:
+    """A random actor in the flax layout that `save_actor` exports (MLP trunk, mean and log-std heads)."""
+    tree, d = {"MLP_0": {}}, obs_dim
+    for i, h in enumerate(hidden):
+        tree["MLP_0"][f"Dense_{i}"] = {"kernel": rng.normal(0, 1 / np.sqrt(d), (d, h)), "bias": np.zeros(h)}
+        d = h
+    tree["Dense_0"] = {"kernel": rng.normal(0, 0.3, (d, 12)), "bias": np.zeros(12)}
+    tree["Dense_1"] = {"kernel": np.zeros((d, 12)), "bias": np.full(12, -1.0)}
+    return tree
+
+
+@pytest.fixture(scope="module")
+def policies(tmp_path_factory) -> Path:
+    root = tmp_path_factory.mktemp("policies")
+    rng = np.random.default_rng(0)
+    for agent in V1_AGENTS:
+        spec = AGENTS[agent]
+        segments = SEGMENTS if spec.role == "data" else []
+        for name in ["final.npz"] + [s["snapshot"] for s in segments if s["snapshot"]]:
+            save_actor(_actor(rng, spec.obs_dim), root / agent / name)
+        log = {"agent": agent, "target_speed": spec.target_speed, "steps": 1600, "segments": segments}
+        (root / agent / "log.json").write_text(json.dumps(log))
+    return root
+
+
+def d5rl_cli(policies: Path, home: Path, *args: str) -> str:
+    env = {**os.environ, "D5RL_A1_POLICIES": str(policies), "D5RL_HOME": str(home),
+           "PYTHONPATH": os.pathsep.join([str(REPO), os.environ.get("PYTHONPATH", "")])}
+    proc = subprocess.run([sys.executable, "-m", "d5rl.cli", *args], env=env, capture_output=True, text=True,
+                          timeout=600)
+    assert proc.returncode == 0, proc.stderr[-3000:]
+    return proc.stdout
+
+
+def published(task_id: str, agents: tuple[str, ...]):
+    """The task's spec as it is once ``agents`` are published with the stand-in training logs."""
+    spec = d5rl.get_spec(task_id)
+    n = len(agents) * sum(s["episodes"] for s in SEGMENTS)
+    return dataclasses.replace(spec, dataset=dataclasses.replace(spec.dataset, num_episodes=n, unavailable=None))
+
+
+@pytest.fixture(scope="module")
+def hiking_home(policies, tmp_path_factory) -> Path:
+    """D5RL_HOME holding the whole stand-in a1-v1-hiking dataset (4 episodes of goals-mixed-v1), verified."""
+    home = tmp_path_factory.mktemp("home")
+    d5rl_cli(policies, home, "generate", "a1-hiking-v1")
+    assert d5rl_cli(policies, home, "verify", "a1-hiking-v1").startswith("OK: 1 shards intact")
+    return home
+
+
+@pytest.fixture
+def hiking_data(hiking_home, monkeypatch):
+    monkeypatch.setenv("D5RL_HOME", str(hiking_home))
+    return load_dataset(published("a1-hiking-v1", ("goals-mixed-v1",)), generate=False, progress=False,
+                        in_memory=True)
+
+
+def test_generation_runs_the_policies_without_xla():
+    """Portable bytes need CPU-independent policy inference: the generator's numpy MLP, never JAX."""
+    code = "import sys, d5rl.envs.a1.data, d5rl.datasets.generation; print(sorted(m for m in sys.modules if m.split('.')[0] in ('jax', 'jaxlib', 'flax')))"
+    out = subprocess.run([sys.executable, "-c", code], capture_output=True, text=True, cwd=REPO, check=True).stdout
+    assert out.strip() == "[]"
+
+
+def test_v1_datasets_are_portable_and_replay_their_scenes():
+    for task in ("a1-walk-v1", "a1-run-v1", "a1-hiking-v1"):
+        dspec = d5rl.get_spec(task).dataset
+        assert dspec.numerics == "portable" and dspec.replay == "d5rl.envs.a1.data:replay_env"
+        assert "not published yet" in dspec.unavailable
+
+
+def test_generated_v1_hiking_data_replays_on_its_own_floors(hiking_data):
+    ds = hiking_data
+    assert ds.metadata["numerics"] == "portable" and ds.num_episodes == 4
+    assert [m["agent"] for m in ds.episode_meta] == ["goals-mixed-v1"] * 4
+    assert sorted(m["segment"] for m in ds.episode_meta) == [0, 0, 1, 2]
+    assert ds.arrays["observations"].shape[1] == 60
+    bumpy_seen = set()
+    for i in range(ds.num_episodes):
+        ep = ds.episode(i)
+        seed = ep.meta["reset_seed"]
+        # the scene drawn independently from the stored seed, in RunToward's order: floor kind (and heights),
+        # friction, trunk mass, first goal (gymnasium seeds the env's generator as default_rng(seed))
+        rng = np.random.default_rng(seed)
+        bumpy = bool(rng.integers(2))
+        heights = arenas.field_data("bumpy", rng) if bumpy else None
+        friction = rng.uniform(*v1.FRICTION_RANGE)
+        mass = rng.uniform(v1.TRUNK_MASS - v1.TRUNK_MASS_SPREAD, v1.TRUNK_MASS + v1.TRUNK_MASS_SPREAD)
+        goal = rng.uniform(-v1.GOAL_RANGE, v1.GOAL_RANGE, 2)
+        bumpy_seen.add(bumpy)
+
+        env = replay_env(d5rl.get_spec("a1-hiking-v1"), ep.meta)
+        m = env.model
+        assert m.geom(arenas.FIELD).pos[2] == (arenas.FIELD_Z if bumpy else -10.0)
+        if bumpy:
+            np.testing.assert_array_equal(m.hfield_data, heights.astype(np.float32))
+        assert m.geom("floor").friction[0] == m.geom(arenas.FIELD).friction[0] == friction
+        assert m.body("trunk").mass[0] == mass
+        np.testing.assert_array_equal(env.task.goal, goal)
+
+        states, actions, obs = ep.arrays["states"], ep.arrays["actions"], ep.arrays["observations"]
+        env.set_state(states[0])
+        np.testing.assert_allclose(env._obs(), obs[0], atol=1e-5)
+        replayed = [env.replay_step(s, a) for s, a in zip(states[1:], actions)]
+        np.testing.assert_allclose(replayed, obs[1:], atol=1e-5)  # heading terms: the goals as drawn then
+        # the scene is the one the episode ran on: the stored action takes a stored state to the next one
+        t = len(actions) // 2
+        env.set_state(states[t])
+        env.step(actions[t])
+        np.testing.assert_allclose(env.get_state(), states[t + 1], rtol=1e-7, atol=1e-9)
+        env.close()
+    assert bumpy_seen == {False, True}
+
+
+def test_the_tasks_own_env_would_not_replay_a_bumpy_episode(hiking_data):
+    """Why the replay env exists: on the hiking course (or any other floor) the stored dynamics break."""
+    ep = next(e for e in hiking_data.episodes() if replay_env(d5rl.get_spec("a1-hiking-v1"), e.meta)
+              .model.geom(arenas.FIELD).pos[2] == arenas.FIELD_Z)
+    env = make_env("a1-hiking-v1").unwrapped
+    env.reset(seed=0)
+    states, actions = ep.arrays["states"], ep.arrays["actions"]
+    env.set_state(states[0])
+    env.step(actions[0])
+    assert not np.allclose(env.get_state(), states[1], rtol=1e-7, atol=1e-9)
+
+
+def test_render_episode_replays_on_the_episodes_floor(hiking_data, hiking_home, policies, tmp_path):
+    from d5rl.registry import make_replay_env
+
+    i = next(i for i, m in enumerate(hiking_data.episode_meta)
+             if replay_env(d5rl.get_spec("a1-hiking-v1"), m).model.geom(arenas.FIELD).pos[2] == arenas.FIELD_Z)
+    env = make_replay_env("a1-hiking-v1", hiking_data.episode_meta[i])  # the dataset's replay, not the course
+    assert isinstance(env.task, v1.RunToward) and not isinstance(env.task, v1.Hiking)
+    env.close()
+    out = tmp_path / "episode.mp4"
+    d5rl_cli(policies, hiking_home, "render", "a1-hiking-v1", "--episode", str(i), "--steps", "2", "--out", str(out))
+    assert out.stat().st_size > 0
+
+
+def test_v1_datacard_stage_shares_and_speed_histogram(hiking_data):
+    from d5rl.envs.a1.datacard_stats import describe, stage_shares
+
+    lengths = [len(hiking_data.episode(i).arrays["actions"]) for i in range(hiking_data.num_episodes)]
+    by_stage = {}
+    for m, n in zip(hiking_data.episode_meta, lengths):
+        by_stage[m["segment"]] = by_stage.get(m["segment"], 0) + n
+    expected = [(seg, SEGMENTS[seg]["snapshot"] or "random", SEGMENTS[seg]["start_step"], by_stage[seg] / sum(lengths))
+                for seg in sorted(by_stage)]
+    got = stage_shares(hiking_data)["goals-mixed-v1"]
+    assert [g[:3] for g in got] == [e[:3] for e in expected]
+    np.testing.assert_allclose([g[3] for g in got], [e[3] for e in expected])
+
+    speeds = np.concatenate([hiking_data.episode(i).arrays["infos/forward_speed"] for i in range(4)])
+    counts, _ = np.histogram(np.clip(speeds, -0.2, 1.2 - 1e-9), np.arange(-0.2, 1.2 + 1e-9, 0.1))
+    text = describe((published("a1-hiking-v1", ("goals-mixed-v1",)),))
+    assert "`a1-v1-hiking` (used by `a1-hiking-v1`)" in text
+    assert f"| 0: random | {100 * expected[0][3]:.1f}% (step 0) |" in text
+    table = text[text.index("| forward speed (m/s) | all steps | `goals-mixed-v1` |"):].splitlines()[2:]
+    assert [r.split(" | ")[-1].rstrip(" |") for r in table] == [f"{100 * c / counts.sum():.1f}%" for c in counts]
+
+
+def test_v1_locomotion_generate_verify_load(policies, tmp_path, monkeypatch):
+    d5rl_cli(policies, tmp_path, "generate", "a1-walk-v1", "--episodes", "6")
+    assert d5rl_cli(policies, tmp_path, "verify", "a1-walk-v1").startswith("OK: 1 shards intact")
+    monkeypatch.setenv("D5RL_HOME", str(tmp_path))
+    walk = load_dataset(published("a1-walk-v1", tuple(a for a in V1_AGENTS if a.startswith("speed"))),
+                        generate=False, progress=False)
+    assert walk.num_episodes == 6 and walk.arrays["observations"].shape[1] == 58
+    assert {m["agent"] for m in walk.episode_meta} <= {"speed-0.5-v1", "speed-0.8-v1", "speed-1.0-v1"}
+    ep = walk.episode(0)
+    env = replay_env(d5rl.get_spec("a1-walk-v1"), ep.meta)
+    replayed = [env.replay_step(s, a) for s, a in zip(ep.arrays["states"][1:], ep.arrays["actions"])]
+    np.testing.assert_allclose(replayed, ep.arrays["observations"][1:], atol=1e-5)
+
+
+def test_calibrate_v1_with_stand_in_agents(policies, tmp_path):
+    result = json.loads(d5rl_cli(policies, tmp_path, "calibrate", "a1-walk-v1", "--episodes", "1", "--dry-run"))
+    env = make_env("a1-walk-v1")
+    rng, returns, lengths = np.random.default_rng(0), [], []
+    for i in range(1):  # uniform random actions in v1's box, as calibrate's random reference defines them
+        env.reset(seed=i)
+        total, done, n = 0.0, False, 0
+        while not done:
+            _, r, term, trunc, _ = env.step(rng.uniform(-1.0, 1.0, 12).astype(np.float32))
+            total, done, n = total + r, term or trunc, n + 1
+        returns.append(total)
+        lengths.append(n)
+    assert result["random"] == pytest.approx(np.mean(returns), abs=1e-3)
+    assert max(lengths) < 400  # random actions in the release's range fall (v0's never did)
+    candidates = ("speed-0.5-v1", "speed-0.8-v1", "speed-1.0-v1", "run-1.25-v1")
+    assert set(result["per_agent"]) == set(candidates)
+    from d5rl.envs.a1.policy import run_episodes
+
+    for agent in candidates:
+        r = run_episodes(env, SnapshotPolicy(policies / agent / "final.npz"), 1, 0)
+        assert result["per_agent"][agent] == pytest.approx(np.mean(r["returns"]), abs=1e-3), agent
+    assert result["expert_agent"] == max(result["per_agent"], key=result["per_agent"].get)
+    assert result["expert"] == result["per_agent"][result["expert_agent"]]
+    assert result["expert_trained"].startswith("SAC, 1,600 steps, tracking ")
