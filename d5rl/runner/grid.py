@@ -26,6 +26,7 @@ from pathlib import Path
 from typing import Iterable
 
 from d5rl.errors import D5RLError
+from d5rl.files import read_json
 
 DEFAULT_JOB = "d5rl.runner.jobs:train_job"
 CELL_FILE = "cell.json"
@@ -130,8 +131,8 @@ def read_cell(cell_dir: Path) -> Cell | None:
     path = Path(cell_dir) / CELL_FILE
     if not path.exists():
         return None
-    with open(path) as f:
-        return Cell.from_json(json.load(f))
+    return Cell.from_json(read_json(path, "cell file", error=GridError,
+                                    hint=f"delete {cell_dir} and run the grid again (the cell starts over)"))
 
 
 def find_cells(run_dir: Path | str) -> list[tuple[Cell, Path]]:

@@ -14,7 +14,7 @@ import jax
 import numpy as np
 
 from d5rl.errors import D5RLError, is_int
-from d5rl.files import write_atomic
+from d5rl.files import read_json, write_atomic
 from d5rl.training.envs import env_factory, episode_scorer
 
 PROGRESS_FORMAT = 1
@@ -182,12 +182,12 @@ class EvalProgress:
         if not self.path.exists():
             return []
         try:
-            data = json.loads(self.path.read_text())
+            data = read_json(self.path, "evaluation progress")  # bounded: a FIFO here is refused, not waited on
             episodes = data["episodes"]
             ok = data["evaluation"] == self._header(evaluation)
             ok = ok and all(set(e) == {"return", "length", "success", "info"} for e in episodes)
             wall = float(data.get("wall_s", 0.0))  # files written before evaluations kept their time: unknown, 0
-        except (OSError, ValueError, KeyError, TypeError) as e:
+        except (OSError, ValueError, KeyError, TypeError, D5RLError) as e:
             print(f"warning: {self.path} is damaged ({type(e).__name__}); the evaluation starts at episode 1",
                   file=sys.stderr, flush=True)
             return []

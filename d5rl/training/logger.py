@@ -8,6 +8,28 @@ import math
 from pathlib import Path
 from typing import Any
 
+from d5rl.errors import D5RLError
+from d5rl.files import read_bytes
+
+METRICS_MAX_BYTES = 1 << 30  # a million-step run logging every 100 steps writes ~50 MB
+
+
+def read_rows(path: Path) -> list[dict]:
+    """The rows of a ``metrics.jsonl`` (bounded; a damaged line is one error naming it)."""
+    hint = f"delete {path} (the run's metrics restart) or train in a new --run-dir"
+    rows = []
+    for i, line in enumerate(read_bytes(path, METRICS_MAX_BYTES, "metrics log", hint=hint).splitlines(), 1):
+        if not line.strip():
+            continue
+        try:
+            row = json.loads(line)
+        except (ValueError, RecursionError):
+            row = None
+        if not isinstance(row, dict) or not isinstance(row.get("step"), int):
+            raise D5RLError(f"{path} line {i} is not a metrics row", hint)
+        rows.append(row)
+    return rows
+
 
 def _tb_writer(log_dir: Path):
     try:
@@ -37,7 +59,7 @@ class Logger:
         self.csv = self.dir / "metrics.csv"
         self.rows = []
         if self.jsonl.exists():
-            self.rows = [json.loads(line) for line in self.jsonl.read_text().splitlines() if line.strip()]
+            self.rows = read_rows(self.jsonl)
         self.columns = sorted({k for r in self.rows for k in r} - {"step"})
         self.tb = _tb_writer(self.dir / "tb") if tensorboard else None
 

@@ -137,3 +137,32 @@ def test_a_full_disk_under_the_run_dir_is_named_as_the_run_dirs(tmp_path, monkey
     with pytest.raises(D5RLError, match=f"the disk holding {tmp_path / 'run'} is full") as e:
         train("td3bc", "toy-reach-v0", 8, 0, 0, overrides(), tmp_path / "run", dataset=toy_dataset(4))
     assert "--run-dir" in e.value.hint and "D5RL_HOME" not in e.value.hint
+
+
+@pytest.mark.parametrize("content, match", [("fifo", "is a FIFO, not a regular file"),
+                                            ('{"step": 1}\n{"step": 2\n', "line 2 is not a metrics row"),
+                                            ('{"step": "1"}\n', "line 1 is not a metrics row")])
+def test_a_damaged_metrics_log_is_a_one_line_error(tmp_path, content, match):
+    import os
+
+    from d5rl.errors import D5RLError
+    from d5rl.training.logger import Logger
+
+    path = tmp_path / "metrics.jsonl"
+    if content == "fifo":
+        os.mkfifo(path)  # reading it would wait for a writer forever
+    else:
+        path.write_text(content)
+    with pytest.raises(D5RLError, match=match):
+        Logger(tmp_path, tensorboard=False)
+
+
+def test_an_evaluation_progress_file_that_is_a_fifo_is_ignored_with_a_warning(tmp_path, capsys):
+    import os
+
+    from d5rl.training.evaluation import EvalProgress
+
+    os.mkfifo(tmp_path / "eval_progress.json")
+    progress = EvalProgress(tmp_path / "eval_progress.json", {"step": 1})
+    assert progress.load({"num_episodes": 2}) == []
+    assert "is damaged (D5RLError); the evaluation starts at episode 1" in capsys.readouterr().err

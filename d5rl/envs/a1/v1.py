@@ -254,7 +254,8 @@ class A1EnvV1(MujocoEnv):
     metadata = {"render_modes": ["rgb_array"], "render_fps": 20}
 
     def __init__(self, task: str = "run", target_speed: float | None = None, render_mode: str | None = None,
-                 render_size: tuple[int, int] = (240, 320), **task_kwargs):
+                 render_size: tuple[int, int] = (240, 320), width: int | None = None, height: int | None = None,
+                 **task_kwargs):
         if task not in TASKS:
             raise ValueError(f"task must be one of {sorted(TASKS)}, got {task!r}")
         self.task = TASKS[task](target_speed, **task_kwargs)
@@ -263,7 +264,7 @@ class A1EnvV1(MujocoEnv):
         spec.option.noslip_tolerance = NOSLIP_TOLERANCE
         arenas.add_floor(spec, self.task.floor)
         super().__init__(spec.compile(), frame_skip=round(CONTROL_DT / PHYSICS_DT), render_mode=render_mode,
-                         render_size=render_size, render_camera="track")
+                         render_size=render_size, render_camera="track", width=width, height=height)
         self.target_speed = self.task.target_speed
         self.idx = Indices.of(self.model)
         self.trunk_id = self.model.body("trunk").id
