@@ -2,6 +2,7 @@
 
 from __future__ import annotations
 
+import dataclasses
 import json
 from pathlib import Path
 
@@ -128,6 +129,15 @@ HIKING_DATA_V1 = DatasetSpec(
     numerics="portable",
     replay=REPLAY_V1,
 )
+# The other hiking data candidate, on the plane only (the paper: the hiking data show "flat terrain"); BC on
+# the course on each decides which agent's buffer is a1-v1-hiking (docs/datacards/a1.md, v1).
+HIKING_SMOOTH_AGENTS_V1 = ("goals-smooth-v1",)
+HIKING_SMOOTH_DATA_V1 = dataclasses.replace(
+    HIKING_DATA_V1, name="a1-v1-hiking-smooth", num_episodes=num_episodes(HIKING_SMOOTH_AGENTS_V1),
+    generator_kwargs={"agents": HIKING_SMOOTH_AGENTS_V1},
+    description="replay buffer of a SAC agent running toward random goals on the plane (the release's "
+                "RunToward, smooth floor only)",
+    unavailable=_unavailable(HIKING_SMOOTH_AGENTS_V1))
 for task_id, speed in (("a1-walk-v1", 0.75), ("a1-run-v1", 1.25)):
     register(TaskSpec(
         id=task_id,
@@ -148,6 +158,7 @@ register(TaskSpec(
     env_kwargs={"task": "hiking", "target_speed": 1.0},
     description="Unitree A1 hiking the release's course (redrawn per episode) through four waypoints at 1 m/s",
     dataset=HIKING_DATA_V1,
+    dataset_variants={"smooth": HIKING_SMOOTH_DATA_V1},  # a1-hiking-smooth-v1
     relabel="d5rl.envs.a1.data:relabel_hiking",
     score=_ref("a1-hiking-v1", _scores_table),
     score_definition="(return - random policy return) / (expert return - random policy return)",

@@ -231,3 +231,20 @@ def test_calibrate_v1_with_stand_in_agents(policies, tmp_path):
     assert result["expert_agent"] == max(result["per_agent"], key=result["per_agent"].get)
     assert result["expert"] == result["per_agent"][result["expert_agent"]]
     assert result["expert_trained"].startswith("SAC, 1,600 steps, tracking ")
+
+
+def test_smooth_hiking_variant_holds_goals_smooth_episodes_on_the_plane(policies, tmp_path, monkeypatch):
+    """a1-hiking-smooth-v1: the other hiking data candidate, for BC on the course against a1-hiking-v1."""
+    spec = d5rl.get_spec("a1-hiking-smooth-v1")
+    assert spec.variant_of == "a1-hiking-v1" and spec.dataset.generator_kwargs == {"agents": ("goals-smooth-v1",)}
+    d5rl_cli(policies, tmp_path, "generate", "a1-hiking-smooth-v1", "--episodes", "4")
+    monkeypatch.setenv("D5RL_HOME", str(tmp_path))
+    n = sum(s["episodes"] for s in SEGMENTS)
+    ds = load_dataset(dataclasses.replace(spec, dataset=dataclasses.replace(spec.dataset, num_episodes=n,
+                                                                            unavailable=None)),
+                      generate=False, progress=False, episodes=4)
+    for m in ds.episode_meta:
+        assert m["agent"] == "goals-smooth-v1"
+        env = replay_env(spec, m)
+        assert env.model.geom(arenas.FIELD).pos[2] == -10.0 and not env.task.bumpy  # no episode on the bumps
+        env.close()
