@@ -248,3 +248,19 @@ def test_smooth_hiking_variant_holds_goals_smooth_episodes_on_the_plane(policies
         env = replay_env(spec, m)
         assert env.model.geom(arenas.FIELD).pos[2] == -10.0 and not env.task.bumpy  # no episode on the bumps
         env.close()
+
+
+def test_browse_renders_an_episode_on_its_own_floor(hiking_data):
+    frames = pytest.importorskip("d5rl.browse.frames")
+    from d5rl.video import replay_frames
+
+    ep = hiking_data.episode(0)
+    spec = d5rl.get_spec("a1-hiking-v1")
+    shown = frames.render_states(spec, ep.arrays["states"][:2], ep.meta)["observations/pixels/view"]
+    expected = np.stack(list(replay_frames(replay_env(spec, ep.meta, render_mode="rgb_array"), ep.arrays["states"][:2],
+                                           frames.ENV_VIEW_SIZE, "fast")))
+    np.testing.assert_array_equal(shown, expected)
+    course = make_env("a1-hiking-v1", render_mode="rgb_array")
+    course.reset(seed=0)
+    on_course = np.stack(list(replay_frames(course, ep.arrays["states"][:2], frames.ENV_VIEW_SIZE, "fast")))
+    assert not np.array_equal(shown, on_course)  # the task's env would show the course around the robot
