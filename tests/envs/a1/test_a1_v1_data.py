@@ -264,3 +264,37 @@ def test_browse_renders_an_episode_on_its_own_floor(hiking_data):
     course.reset(seed=0)
     on_course = np.stack(list(replay_frames(course, ep.arrays["states"][:2], frames.ENV_VIEW_SIZE, "fast")))
     assert not np.array_equal(shown, on_course)  # the task's env would show the course around the robot
+
+
+@pytest.mark.slow
+def test_trained_and_published_agent_generates_v1_data(policies, tmp_path, monkeypatch):
+    """The real path: a tiny run of the v1 trainer, `publish` into the policy directory, then `d5rl generate`."""
+    pytest.importorskip("jax")
+    shipped = tmp_path / "policies"
+    for agent in ("speed-0.8-v1", "speed-1.0-v1"):  # stand-ins for the other two data agents
+        for f in (policies / agent).iterdir():
+            (shipped / agent).mkdir(parents=True, exist_ok=True)
+            (shipped / agent / f.name).write_bytes(f.read_bytes())
+    trainer = ["-m", "d5rl.envs.a1.experts"]
+    env = {**os.environ, "D5RL_A1_POLICIES": str(shipped),
+           "PYTHONPATH": os.pathsep.join([str(REPO), os.environ.get("PYTHONPATH", "")])}
+    for args in (["train", "--agents", "speed-0.5-v1", "--steps", "500", "--start-steps", "200", "--first-segment",
+                  "100", "--snapshot-every", "200", "--utd", "1", "--work-dir", str(tmp_path / "work"),
+                  "--policy-dir", str(tmp_path / "trained"), "--saved-dir", str(tmp_path / "saved")],
+                 ["publish", "--agents", "speed-0.5-v1", "--policy-dir", str(tmp_path / "trained")]):
+        proc = subprocess.run([sys.executable, *trainer, *args], env=env, capture_output=True, text=True, timeout=600)
+        assert proc.returncode == 0, proc.stderr[-3000:]
+    log = json.loads((shipped / "speed-0.5-v1" / "log.json").read_text())
+    assert [s["snapshot"] for s in log["segments"]] == [None, "snapshot-01.npz", "snapshot-02.npz"]
+    n = sum(s["episodes"] for s in log["segments"]) + 2 * sum(s["episodes"] for s in SEGMENTS)
+    d5rl_cli(shipped, tmp_path / "home", "generate", "a1-walk-v1")
+    assert d5rl_cli(shipped, tmp_path / "home", "verify", "a1-walk-v1").startswith("OK: ")
+    monkeypatch.setenv("D5RL_HOME", str(tmp_path / "home"))
+    spec = d5rl.get_spec("a1-walk-v1")
+    ds = load_dataset(dataclasses.replace(spec, dataset=dataclasses.replace(spec.dataset, num_episodes=n,
+                                                                            unavailable=None)),
+                      generate=False, progress=False)
+    trained = [m for m in ds.episode_meta if m["agent"] == "speed-0.5-v1"]
+    by_segment = {i: sum(m["segment"] == i for m in trained) for i in range(3)}
+    assert by_segment == {i: s["episodes"] for i, s in enumerate(log["segments"])}  # the buffer, episode for episode
+    assert {m["snapshot"] for m in trained} == {"random", "snapshot-01.npz", "snapshot-02.npz"}
