@@ -298,3 +298,16 @@ def test_trained_and_published_agent_generates_v1_data(policies, tmp_path, monke
     by_segment = {i: sum(m["segment"] == i for m in trained) for i in range(3)}
     assert by_segment == {i: s["episodes"] for i, s in enumerate(log["segments"])}  # the buffer, episode for episode
     assert {m["snapshot"] for m in trained} == {"random", "snapshot-01.npz", "snapshot-02.npz"}
+
+
+def test_calibrate_v1_hiking_picks_among_the_goal_agents_and_the_course_reference(policies, tmp_path):
+    result = json.loads(d5rl_cli(policies, tmp_path, "calibrate", "a1-hiking-v1", "--episodes", "1", "--dry-run"))
+    assert set(result["per_agent"]) == {"goals-mixed-v1", "goals-smooth-v1", "hiking-v1"}
+    env = make_env("a1-hiking-v1")
+    from d5rl.envs.a1.policy import run_episodes
+
+    for agent, ret in result["per_agent"].items():  # 60-D observations: the heading error to the next waypoint
+        r = run_episodes(env, SnapshotPolicy(policies / agent / "final.npz"), 1, 0)
+        assert ret == pytest.approx(np.mean(r["returns"]), abs=1e-3), agent
+    assert result["expert"] == max(result["per_agent"].values())
+    assert "toward random goals" in result["expert_trained"] or "hiking course" in result["expert_trained"]
