@@ -64,7 +64,8 @@ def typical_rollout(cell_dir: Path, task: str, *, episodes: int = 5, size=GIF_SI
     from d5rl.video import FrameRenderer
 
     agent, resolved = load_run(cell_dir)
-    env = make_task_env(task, resolved["train"]["frame_stack"])
+    env = make_task_env(task, resolved["train"]["frame_stack"], render_mode="rgb_array")  # envs without a
+    # MuJoCo camera (toy) are filmed through render(), which needs a render mode as in Gymnasium
     try:
         scores = [_episode(agent, env, task, s)[0] for s in range(episodes)]
         median = sorted(scores)[(episodes - 1) // 2]
