@@ -264,6 +264,12 @@ def test_a_bad_mujoco_gl_does_not_break_list_and_rendering_says_why(tmp_path, va
                              "import mujoco\nmake_renderer(mujoco.MjModel.from_xml_string('<mujoco/>'), 8, 8)"],
                             env=env, capture_output=True, text=True, timeout=120)
     assert render.returncode != 0 and needle in render.stderr.splitlines()[-1], render.stderr[-2000:]
+    # a worker process inherits MUJOCO_GL=disable and the reason with it
+    child = "import d5rl.envs; print(d5rl.envs.GL_PROBLEM)"
+    worker = subprocess.run([sys.executable, "-c", "import subprocess, sys\nimport d5rl.envs\n"
+                             f"print(subprocess.run([sys.executable, '-c', {child!r}], capture_output=True, "
+                             "text=True).stdout)"], env=env, capture_output=True, text=True, timeout=120)
+    assert needle in worker.stdout, worker.stderr[-2000:]
 
 
 def test_a_gl_backend_whose_library_is_missing_is_named():

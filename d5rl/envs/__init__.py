@@ -53,3 +53,6 @@ if "mujoco" not in sys.modules and os.environ.get("MUJOCO_GL") is not None:
     GL_PROBLEM = gl_problem(os.environ["MUJOCO_GL"])
     if GL_PROBLEM is not None:
         os.environ["MUJOCO_GL"] = "disable"
+        os.environ["D5RL_GL_PROBLEM"] = GL_PROBLEM  # worker processes inherit the reason with the setting
+    elif os.environ["MUJOCO_GL"] == "disable":
+        GL_PROBLEM = os.environ.get("D5RL_GL_PROBLEM")
