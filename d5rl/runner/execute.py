@@ -28,11 +28,14 @@ from pathlib import Path
 
 from d5rl.runner.grid import (CELL_FILE, DONE_FILE, ERROR_FILE, FAILURES_FILE, LOCK_FILE, LOG_FILE,
                               RUNNER_FILES, Cell)
-from d5rl.files import try_lock, write_atomic
+from d5rl.files import read_bytes, try_lock, write_atomic
 
 def write_cell_file(cell: Cell, cell_dir: Path) -> None:
     cell_dir.mkdir(parents=True, exist_ok=True)
     write_atomic(cell_dir / CELL_FILE, json.dumps(cell.to_json(), indent=2, sort_keys=True) + "\n")
+
+
+FAILURES_MAX_BYTES = 64 << 20  # a record is a few kB (its traceback); a cell fails a handful of times
 
 
 def read_failures(cell_dir: Path) -> list[dict]:
@@ -40,7 +43,7 @@ def read_failures(cell_dir: Path) -> list[dict]:
     if not path.exists():
         return []
     out = []
-    for line in path.read_text().splitlines():
+    for line in read_bytes(path, FAILURES_MAX_BYTES, "failure log").decode(errors="replace").splitlines():
         if line.strip():
             with contextlib.suppress(json.JSONDecodeError):
                 out.append(json.loads(line))

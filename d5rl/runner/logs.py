@@ -55,7 +55,9 @@ def read_evals(cell_dir: Path, task: str | None = None, offline_steps: int | Non
     if path is None:
         return []
     if path.suffix == ".jsonl":
-        raw = [json.loads(line) for line in path.read_text().splitlines() if line.strip()]
+        from d5rl.training.logger import read_rows
+
+        raw = read_rows(path)  # bounded, and a damaged line is one error naming it
     else:
         with open(path, newline="") as f:
             raw = list(csv.DictReader(f))
