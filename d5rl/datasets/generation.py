@@ -94,15 +94,25 @@ def shard_plan(num_episodes: int, per_shard: int) -> list[tuple[int, int]]:
 
 
 def _identity(dspec: DatasetSpec, seed: int, generator_version: str) -> dict:
-    """What every shard and the manifest must agree on for data to be reused (as stored in JSON)."""
-    return _json_normal({
+    """What every shard and the manifest must agree on for data to be reused (as stored in JSON).
+
+    A generator that replays files outside the code (the A1 agents' policy snapshots) names them by
+    digest through an ``inputs(**generator_kwargs)`` static method: data made from other files (e.g.
+    trial policies under ``D5RL_A1_POLICIES``) then never pass for the data of the published ones."""
+    ident = {
         "dataset": dspec.name,
         "dataset_version": dspec.version,
         "generator": dspec.producer,  # the importer, for an imported dataset
         "generator_version": generator_version,
         "generator_kwargs": dspec.generator_kwargs,
         "seed": seed,
-    })
+    }
+    inputs = getattr(resolve(dspec.producer), "inputs", None)
+    if inputs is not None and not dspec.unavailable:
+        digests = inputs(**dspec.generator_kwargs)
+        if digests:  # absent rather than empty, so data without such inputs keep their identity
+            ident["generator_inputs"] = digests
+    return _json_normal(ident)
 
 
 def identity(dspec: DatasetSpec, seed: int | None = None) -> dict:
@@ -187,7 +197,7 @@ def _run_shard(root: str, index: int, start: int, stop: int, ident: dict) -> dic
 
 # --- what a result was trained on --------------------------------------------------------------------
 # The part of a dataset's identity that decides its content (a result trained on data that differs in any
-# of these describes other data).
+# of these describes other data); "generator_inputs" too where the generator has them.
 RESULT_IDENTITY_KEYS = ("dataset", "dataset_version", "generator_version", "seed")
 
 
@@ -200,7 +210,7 @@ def data_identity(task: str | TaskSpec, seed: int | None = None) -> dict | None:
     dspec = spec.dataset
     seed = dspec.default_seed if seed is None else int(seed)
     ident = _identity(dspec, seed, str(resolve(dspec.producer).version))
-    return {k: ident[k] for k in RESULT_IDENTITY_KEYS}
+    return {k: ident[k] for k in (*RESULT_IDENTITY_KEYS, "generator_inputs") if k in ident}
 
 
 def stale_data(task: str, recorded: dict | None) -> str | None:
@@ -214,9 +224,12 @@ def stale_data(task: str, recorded: dict | None) -> str | None:
         return None
     if now is None:
         return None
-    diffs = [k for k in RESULT_IDENTITY_KEYS if recorded.get(k) != now[k]]
+    diffs = [k for k in now if recorded.get(k) != now[k]]
     if not diffs:
         return None
+    if diffs == ["generator_inputs"]:
+        return (f"trained on {recorded.get('dataset')} made from other generator inputs than the published "
+                f"ones ({', '.join(sorted(now['generator_inputs']))})")
     return (f"trained on {recorded.get('dataset')} v{recorded.get('dataset_version')} "
             f"(generator {recorded.get('generator_version')}); the task's data is now "
             f"{now['dataset']} v{now['dataset_version']} (generator {now['generator_version']})")

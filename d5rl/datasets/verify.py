@@ -1,4 +1,5 @@
-"""Integrity check of a generated dataset: every file present, every checksum right."""
+"""Integrity check of a generated dataset: every file present, every checksum right, and made by this code
+from the inputs it would use now (its identity)."""
 
 from __future__ import annotations
 
@@ -6,7 +7,7 @@ import dataclasses
 from pathlib import Path
 
 from d5rl.datasets import format as fmt
-from d5rl.datasets.generation import dataset_root, dataset_spec
+from d5rl.datasets.generation import check_current, dataset_root, dataset_spec
 from d5rl.errors import D5RLError
 from d5rl.registry import TaskSpec, get_spec
 
@@ -47,6 +48,11 @@ def verify_dataset(task: str | TaskSpec, seed: int | None = None, progress: bool
         manifest = fmt.read_manifest(manifest_path)
     except D5RLError as e:
         return VerifyReport(root, 0, [e.message])
+    dspec = dataset_spec(spec)
+    try:  # intact bytes of other data (older code, other settings, other policy files) are not this dataset
+        check_current(manifest, dspec, dspec.default_seed if seed is None else seed, root)
+    except D5RLError as e:
+        problems.append(str(e))  # with its hint: `generate --force`, not the plain repair below
     entries = manifest.get("shards", [])
     dirs = [(root / "shards" / e["name"], e) for e in entries]
     for render_root in sorted((root / "renders").glob("*")) if (root / "renders").exists() else []:

@@ -16,6 +16,10 @@ the floor they were collected on.
 
 from __future__ import annotations
 
+import functools
+import hashlib
+from pathlib import Path
+
 import numpy as np
 
 from d5rl.datasets.episode import Episode
@@ -28,10 +32,35 @@ from d5rl.errors import D5RLError
 INFO_KEYS = ("forward_speed", "standing", "energy", "heading_error")
 
 
+def policy_digest(agent: str, policy_dir: Path | None = None) -> str:
+    """sha256 over the names and bytes of ``agent``'s policy files in ``policy_dir`` (default: the policy
+    directory, :data:`POLICY_DIR`), cached per file sizes and times."""
+    folder = Path(POLICY_DIR if policy_dir is None else policy_dir) / agent
+    files = sorted(p for p in folder.iterdir() if p.is_file()) if folder.is_dir() else []
+    return _digest(tuple((str(p), p.stat().st_size, p.stat().st_mtime_ns) for p in files))
+
+
+@functools.lru_cache(maxsize=64)
+def _digest(files: tuple[tuple[str, int, int], ...]) -> str:
+    h = hashlib.sha256()
+    for path, _, _ in files:
+        h.update(Path(path).name.encode() + b"\0")
+        h.update(hashlib.sha256(Path(path).read_bytes()).digest())
+    return h.hexdigest()
+
+
 class ReplayBufferGenerator:
     """Episode ``i`` = training episode ``episode_table(agents)[i]``, re-collected by its snapshot."""
 
     version = "1"
+
+    @staticmethod
+    def inputs(agents: tuple[str, ...]) -> dict[str, str]:
+        """The dataset identity's ``generator_inputs``: a digest of each v1 agent's policy files (its
+        snapshots, final policy and training log), so data replayed from trial policies
+        (``D5RL_A1_POLICIES``) never pass for the published agents' data.  v0's agents are left out: their
+        datasets were made before this key and their policies are fixed in the package."""
+        return {a: policy_digest(a) for a in agents if AGENTS[a].env_version == 1}
 
     def __init__(self, task_id: str, agents: tuple[str, ...]):
         self.agents = tuple(agents)

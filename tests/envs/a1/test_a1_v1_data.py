@@ -19,6 +19,7 @@ import pytest
 import d5rl
 from d5rl.datasets.loading import load_dataset
 from d5rl.envs.a1 import arenas, v1
+from d5rl.envs.a1 import data as a1_data
 from d5rl.envs.a1.agents import AGENTS
 from d5rl.envs.a1.data import replay_env
 from d5rl.envs.a1.policy import SnapshotPolicy, save_actor
@@ -83,8 +84,9 @@ def hiking_home(policies, tmp_path_factory) -> Path:
 
 
 @pytest.fixture
-def hiking_data(hiking_home, monkeypatch):
+def hiking_data(hiking_home, policies, monkeypatch):
     monkeypatch.setenv("D5RL_HOME", str(hiking_home))
+    monkeypatch.setattr(a1_data, "POLICY_DIR", policies)  # what D5RL_A1_POLICIES does in a new process
     return load_dataset(published("a1-hiking-v1", ("goals-mixed-v1",)), generate=False, progress=False,
                         in_memory=True)
 
@@ -197,6 +199,7 @@ def test_v1_locomotion_generate_verify_load(policies, tmp_path, monkeypatch):
     d5rl_cli(policies, tmp_path, "generate", "a1-walk-v1", "--episodes", "6")
     assert d5rl_cli(policies, tmp_path, "verify", "a1-walk-v1").startswith("OK: 1 shards intact")
     monkeypatch.setenv("D5RL_HOME", str(tmp_path))
+    monkeypatch.setattr(a1_data, "POLICY_DIR", policies)
     walk = load_dataset(published("a1-walk-v1", tuple(a for a in V1_AGENTS if a.startswith("speed"))),
                         generate=False, progress=False)
     assert walk.num_episodes == 6 and walk.arrays["observations"].shape[1] == 58
@@ -239,6 +242,7 @@ def test_smooth_hiking_variant_holds_goals_smooth_episodes_on_the_plane(policies
     assert spec.variant_of == "a1-hiking-v1" and spec.dataset.generator_kwargs == {"agents": ("goals-smooth-v1",)}
     d5rl_cli(policies, tmp_path, "generate", "a1-hiking-smooth-v1", "--episodes", "4")
     monkeypatch.setenv("D5RL_HOME", str(tmp_path))
+    monkeypatch.setattr(a1_data, "POLICY_DIR", policies)
     n = sum(s["episodes"] for s in SEGMENTS)
     ds = load_dataset(dataclasses.replace(spec, dataset=dataclasses.replace(spec.dataset, num_episodes=n,
                                                                             unavailable=None)),
@@ -290,6 +294,7 @@ def test_trained_and_published_agent_generates_v1_data(policies, tmp_path, monke
     d5rl_cli(shipped, tmp_path / "home", "generate", "a1-walk-v1")
     assert d5rl_cli(shipped, tmp_path / "home", "verify", "a1-walk-v1").startswith("OK: ")
     monkeypatch.setenv("D5RL_HOME", str(tmp_path / "home"))
+    monkeypatch.setattr(a1_data, "POLICY_DIR", shipped)
     spec = d5rl.get_spec("a1-walk-v1")
     ds = load_dataset(dataclasses.replace(spec, dataset=dataclasses.replace(spec.dataset, num_episodes=n,
                                                                             unavailable=None)),
@@ -311,3 +316,31 @@ def test_calibrate_v1_hiking_picks_among_the_goal_agents_and_the_course_referenc
         assert ret == pytest.approx(np.mean(r["returns"]), abs=1e-3), agent
     assert result["expert"] == max(result["per_agent"].values())
     assert "toward random goals" in result["expert_trained"] or "hiking course" in result["expert_trained"]
+
+
+def test_data_from_other_policy_files_is_not_the_published_agents_data(policies, hiking_home, tmp_path):
+    """The identity names the policy files by digest: with one snapshot changed (a trial agent, or a
+    newer publication), the dataset on disk is reported as made by other inputs instead of being used."""
+    import shutil
+
+    other = tmp_path / "policies"
+    shutil.copytree(policies, other)
+    save_actor(_actor(np.random.default_rng(1), AGENTS["goals-mixed-v1"].obs_dim),
+               other / "goals-mixed-v1" / "snapshot-01.npz")
+    env = {**os.environ, "D5RL_A1_POLICIES": str(other), "D5RL_HOME": str(hiking_home),
+           "PYTHONPATH": os.pathsep.join([str(REPO), os.environ.get("PYTHONPATH", "")])}
+    proc = subprocess.run([sys.executable, "-m", "d5rl.cli", "verify", "a1-hiking-v1"], env=env,
+                          capture_output=True, text=True, timeout=600)
+    assert proc.returncode != 0
+    assert "generator_inputs" in proc.stderr and "Traceback" not in proc.stderr, proc.stderr[-2000:]
+    d5rl_cli(policies, hiking_home, "verify", "a1-hiking-v1")  # the files it was made from: intact
+
+    from d5rl.datasets import generation
+    from d5rl.envs.a1.data import policy_digest
+
+    spec = published("a1-hiking-v1", ("goals-mixed-v1",))
+    recorded = {**generation.data_identity(spec), "generator_inputs": {"goals-mixed-v1": policy_digest(
+        "goals-mixed-v1", other)}}
+    assert "other generator inputs" in generation.stale_data(spec, recorded)
+    assert generation.stale_data(spec, generation.data_identity(spec)) is None
+    assert generation.data_identity(spec)["generator_inputs"] == {"goals-mixed-v1": policy_digest("goals-mixed-v1")}
