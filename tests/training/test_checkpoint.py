@@ -142,14 +142,15 @@ def test_damaged_latest_checkpoint_resumes_from_previous_and_matches(tmp_path, c
 def test_a_checkpoint_of_another_observation_size_is_refused_in_one_line(tmp_path):
     """flax restores arrays of any shape: without a check the run failed deep in the first update."""
     run = tmp_path / "run"
-    train("bc", "toy-reach-v0", 8, 0, 0, SMALL + ["checkpoint_interval=8"], run, dataset=toy_dataset(10))
+    # a constant lr: BC's default decay horizon follows the run's length, and a longer run is another config
+    overrides = SMALL + ["checkpoint_interval=8", "actor_decay_steps=0"]
+    train("bc", "toy-reach-v0", 8, 0, 0, overrides, run, dataset=toy_dataset(10))
     ds = toy_dataset(10)
     eps = [ds.episode(i) for i in range(ds.num_episodes)]
     for e in eps:
         e.arrays["observations"] = np.concatenate([e.arrays["observations"]] * 2, axis=1)
     with pytest.raises(CheckpointError, match=r"has shape \(4, 32\), this agent's \(8, 32\)"):
-        train("bc", "toy-reach-v0", 16, 0, 0, SMALL + ["checkpoint_interval=8"], run,
-              dataset=Dataset.from_episodes(eps, metadata=ds.metadata))
+        train("bc", "toy-reach-v0", 16, 0, 0, overrides, run, dataset=Dataset.from_episodes(eps, metadata=ds.metadata))
 
 
 def test_a_fresh_start_drops_the_metrics_of_a_killed_attempt_without_checkpoint(tmp_path):
