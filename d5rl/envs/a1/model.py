@@ -138,3 +138,27 @@ class Indices:
             return slice(int(s.adr[0]), int(s.adr[0] + s.dim[0]))
 
         return cls(qpos, qvel, sens("gyro"), sens("velocimeter"))
+
+
+class A1State:
+    """Named state accessors of an A1 env (v0 and v1): the env sets ``data``, ``idx`` (:class:`Indices`)
+    and ``trunk_id``."""
+
+    def joint_pos(self):
+        return self.data.qpos[self.idx.qpos_joints]
+
+    def joint_vel(self):
+        return self.data.qvel[self.idx.qvel_joints]
+
+    def torques(self):
+        return self.data.actuator_force.copy()
+
+    def body_quat(self):
+        return self.data.qpos[3:7]
+
+    def local_velocity(self):
+        return self.data.sensordata[self.idx.velocimeter]
+
+    def upright(self) -> float:
+        """z component of the body's up axis in the world frame (1 = level)."""
+        return float(self.data.xmat[self.trunk_id][8])

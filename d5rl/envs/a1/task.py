@@ -7,7 +7,8 @@ import mujoco
 import numpy as np
 
 from d5rl.envs.a1 import rewards
-from d5rl.envs.a1.model import ACTION_SCALE, CONTROL_DT, NOMINAL_POSE, PHYSICS_DT, Course, Indices, build_model
+from d5rl.envs.a1.model import (ACTION_SCALE, CONTROL_DT, NOMINAL_POSE, PHYSICS_DT, A1State, Course, Indices,
+                                build_model)
 from d5rl.envs.base import MujocoEnv
 
 MAX_TILT = np.deg2rad(60.0)
@@ -27,7 +28,7 @@ def _wrap(a):
     return (a + np.pi) % (2 * np.pi) - np.pi
 
 
-class A1Env(MujocoEnv):
+class A1Env(A1State, MujocoEnv):
     """Unitree A1 quadruped tracking a forward speed, on flat ground or on a hiking course.
 
     **Description.** The MuJoCo Menagerie A1 under 20 Hz PD position control (kp 60, kd 6,
@@ -90,6 +91,7 @@ class A1Env(MujocoEnv):
         self.heading_change_steps = int(heading_change_steps)
         self.energy_coef = rewards.ENERGY_COEF if command == "forward" else rewards.HIKING_ENERGY_COEF
         self.idx = Indices.of(self.model)
+        self.trunk_id = self.model.body("trunk").id
         self._home = self.model.key("home").id  # an id, not a keyframe view: the env pickles and deep-copies
         obs_dim = 58 + (2 if command != "forward" else 0)
         self.observation_space = gym.spaces.Box(-np.inf, np.inf, (obs_dim,), np.float32)
@@ -99,25 +101,6 @@ class A1Env(MujocoEnv):
         self._waypoint = 0
         self._t = 0
 
-    # --- state accessors -----------------------------------------------------------------------
-    def joint_pos(self):
-        return self.data.qpos[self.idx.qpos_joints]
-
-    def joint_vel(self):
-        return self.data.qvel[self.idx.qvel_joints]
-
-    def torques(self):
-        return self.data.actuator_force.copy()
-
-    def body_quat(self):
-        return self.data.qpos[3:7]
-
-    def local_velocity(self):
-        return self.data.sensordata[self.idx.velocimeter]
-
-    def upright(self) -> float:
-        """z component of the body's up axis in the world frame (1 = level)."""
-        return float(self.data.xmat[1][8])
 
     # --- task -------------------------------------------------------------------------------------
     def _desired_heading(self) -> float:

@@ -13,7 +13,8 @@ import mujoco
 import numpy as np
 
 from d5rl.envs.a1 import arenas, rewards
-from d5rl.envs.a1.model import ACTION_SCALE, CONTROL_DT, JOINTS, NOMINAL_POSE, PHYSICS_DT, Indices, build_spec
+from d5rl.envs.a1.model import (ACTION_SCALE, CONTROL_DT, JOINTS, NOMINAL_POSE, PHYSICS_DT, A1State, Indices,
+                                build_spec)
 from d5rl.envs.base import MujocoEnv
 
 ACTION_RANGE = 3.0  # joint targets span nominal ± ACTION_RANGE × ACTION_SCALE (the release's ACTION_OFFSET)
@@ -206,7 +207,7 @@ class Hiking(RunToward):
 TASKS = {"run": Run, "run_toward": RunToward, "hiking": Hiking}
 
 
-class A1EnvV1(MujocoEnv):
+class A1EnvV1(A1State, MujocoEnv):
     """Unitree A1 tasks as the D5RL release defines them: track a speed, run toward goals, or hike.
 
     **Description.** The MuJoCo Menagerie A1 (the release's model) under 20 Hz PD position control
@@ -276,25 +277,6 @@ class A1EnvV1(MujocoEnv):
         self._t = 0
         self._speed_sum = 0.0
 
-    # --- state accessors -----------------------------------------------------------------------
-    def joint_pos(self):
-        return self.data.qpos[self.idx.qpos_joints]
-
-    def joint_vel(self):
-        return self.data.qvel[self.idx.qvel_joints]
-
-    def torques(self):
-        return self.data.actuator_force.copy()
-
-    def body_quat(self):
-        return self.data.qpos[3:7]
-
-    def local_velocity(self):
-        return self.data.sensordata[self.idx.velocimeter]
-
-    def upright(self) -> float:
-        """z component of the body's up axis in the world frame (1 = level)."""
-        return float(self.data.xmat[self.trunk_id][8])
 
     def joint_targets(self, action) -> np.ndarray:
         """Joint targets of an action in [-1, 1] (linear onto :func:`action_box`)."""
