@@ -27,7 +27,6 @@ import sys
 import time
 
 import numpy as np
-
 from torch_reference import torch_runner  # bench/torch_reference.py: the plain PyTorch baselines
 
 OBS_DIM, ACT_DIM, BATCH = 58, 12, 256
@@ -38,21 +37,28 @@ KEYS = ("observations", "actions", "rewards", "masks", "next_observations", "mc_
 # ============================== data ==============================
 def make_batch(n: int, pixels: bool, rng: np.random.Generator) -> dict:
     if pixels:
+
         def obs():
             o = {f"pixels/cam{i}": rng.integers(0, 256, (n, PIX, PIX, 3 * STACK), dtype=np.uint8) for i in range(CAMS)}
             o["proprio"] = rng.standard_normal((n, PROPRIO)).astype(np.float32)
             return o
+
         a_dim = PIX_ACT
     else:
+
         def obs():
             return rng.standard_normal((n, OBS_DIM)).astype(np.float32)
+
         a_dim = ACT_DIM
-    return {"observations": obs(), "next_observations": obs(),
-            "actions": rng.uniform(-0.99, 0.99, (n, a_dim)).astype(np.float32),
-            "rewards": rng.standard_normal(n).astype(np.float32),
-            "masks": (rng.random(n) > 0.01).astype(np.float32),
-            "mc_returns": rng.standard_normal(n).astype(np.float32),
-            "next_actions": rng.uniform(-0.99, 0.99, (n, a_dim)).astype(np.float32)}
+    return {
+        "observations": obs(),
+        "next_observations": obs(),
+        "actions": rng.uniform(-0.99, 0.99, (n, a_dim)).astype(np.float32),
+        "rewards": rng.standard_normal(n).astype(np.float32),
+        "masks": (rng.random(n) > 0.01).astype(np.float32),
+        "mc_returns": rng.standard_normal(n).astype(np.float32),
+        "next_actions": rng.uniform(-0.99, 0.99, (n, a_dim)).astype(np.float32),
+    }
 
 
 # ============================== JAX side ==============================
@@ -113,8 +119,12 @@ def main(argv=None) -> int:
     p.add_argument("--seconds", type=float, default=4.0, help="per measurement")
     p.add_argument("--repeats", type=int, default=3, help="alternating JAX / torch repeats (median)")
     p.add_argument("--updates-per-call", type=int, default=8, help="lax.scan length for state agents")
-    p.add_argument("--torch-threads", type=int, default=0,
-                   help="torch intra-op threads; 0 = try 1 and all CPUs per case and keep the faster")
+    p.add_argument(
+        "--torch-threads",
+        type=int,
+        default=0,
+        help="torch intra-op threads; 0 = try 1 and all CPUs per case and keep the faster",
+    )
     args = p.parse_args(argv)
     try:
         import torch
@@ -125,8 +135,10 @@ def main(argv=None) -> int:
         ref_name = None
     import jax
 
-    print(f"# {platform.processor() or platform.machine()}, {os.cpu_count()} CPUs, jax {jax.__version__} "
-          f"({jax.default_backend()}), reference: {ref_name or 'none (torch not installed)'}")
+    print(
+        f"# {platform.processor() or platform.machine()}, {os.cpu_count()} CPUs, jax {jax.__version__} "
+        f"({jax.default_backend()}), reference: {ref_name or 'none (torch not installed)'}"
+    )
     print(f"{'agent':10s} {'obs':6s} {'jax upd/s':>10s} {'torch upd/s':>12s} {'ratio':>6s} {'torch thr':>9s}")
     kinds = ([False] if not args.no_state else []) + ([True] if not args.no_pixels else [])
     worst = math.inf
@@ -154,8 +166,10 @@ def main(argv=None) -> int:
             t = statistics.median(ts) if ts else float("nan")
             ratio = j / t if ts else float("nan")
             worst = min(worst, ratio) if ts else worst
-            print(f"{name:10s} {'pixels' if pixels else 'state':6s} {j:10.1f} {t:12.1f} {ratio:6.2f} {threads:9d}",
-                  flush=True)
+            print(
+                f"{name:10s} {'pixels' if pixels else 'state':6s} {j:10.1f} {t:12.1f} {ratio:6.2f} {threads:9d}",
+                flush=True,
+            )
     if math.isfinite(worst):
         print(f"# slowest ratio: {worst:.2f}")
     return 0

@@ -27,7 +27,7 @@ import numpy as np
 
 sys.path.insert(0, os.path.dirname(os.path.dirname(os.path.abspath(__file__))))
 
-from bench.timing import rate  # noqa: E402
+from bench.timing import rate
 
 OBS, ACT, B, H, N = 58, 12, 256, 256, 10
 
@@ -43,17 +43,23 @@ def main() -> None:
     from d5rl.agents import get_agent  # also sets d5rl's XLA flags
 
     rng = np.random.default_rng(0)
-    batch = {"observations": rng.standard_normal((B, OBS), np.float32),
-             "next_observations": rng.standard_normal((B, OBS), np.float32),
-             "actions": rng.uniform(-0.99, 0.99, (B, ACT)).astype(np.float32),
-             "rewards": rng.standard_normal(B).astype(np.float32), "masks": np.ones(B, np.float32),
-             "mc_returns": rng.standard_normal(B).astype(np.float32)}
+    batch = {
+        "observations": rng.standard_normal((B, OBS), np.float32),
+        "next_observations": rng.standard_normal((B, OBS), np.float32),
+        "actions": rng.uniform(-0.99, 0.99, (B, ACT)).astype(np.float32),
+        "rewards": rng.standard_normal(B).astype(np.float32),
+        "masks": np.ones(B, np.float32),
+        "mc_returns": rng.standard_normal(B).astype(np.float32),
+    }
 
     # the floor: two critic MLPs on (1 + 3N) x B rows with gradients, plus the target on B rows
     rows = (1 + 3 * N) * B
     keys = jax.random.split(jax.random.PRNGKey(0), 6)
-    w = [jax.random.normal(keys[0], (2, OBS + ACT, H)) * 0.1, jax.random.normal(keys[1], (2, H, H)) * 0.1,
-         jax.random.normal(keys[2], (2, H, 1)) * 0.1]
+    w = [
+        jax.random.normal(keys[0], (2, OBS + ACT, H)) * 0.1,
+        jax.random.normal(keys[1], (2, H, H)) * 0.1,
+        jax.random.normal(keys[2], (2, H, 1)) * 0.1,
+    ]
     x = jax.random.normal(keys[3], (rows, OBS + ACT))
     xt = jax.random.normal(keys[4], (B, OBS + ACT))
 

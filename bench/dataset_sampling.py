@@ -29,7 +29,7 @@ import numpy as np
 
 sys.path.insert(0, os.path.dirname(os.path.dirname(os.path.abspath(__file__))))
 
-from bench.timing import rate  # noqa: E402
+from bench.timing import rate
 
 
 def synthetic_episodes(n_eps=200, length=400, obs_dim=61, act_dim=12, seed=0):
@@ -37,13 +37,15 @@ def synthetic_episodes(n_eps=200, length=400, obs_dim=61, act_dim=12, seed=0):
 
     rng = np.random.default_rng(seed)
     for _ in range(n_eps):
-        yield Episode({
-            "observations": rng.normal(size=(length + 1, obs_dim)).astype(np.float32),
-            "actions": rng.uniform(-1, 1, (length, act_dim)).astype(np.float32),
-            "rewards": rng.normal(size=length).astype(np.float32),
-            "terminals": np.zeros(length, bool),
-            "timeouts": np.eye(1, length, length - 1, dtype=bool)[0],
-        })
+        yield Episode(
+            {
+                "observations": rng.normal(size=(length + 1, obs_dim)).astype(np.float32),
+                "actions": rng.uniform(-1, 1, (length, act_dim)).astype(np.float32),
+                "rewards": rng.normal(size=length).astype(np.float32),
+                "terminals": np.zeros(length, bool),
+                "timeouts": np.eye(1, length, length - 1, dtype=bool)[0],
+            }
+        )
 
 
 def kitchen_frames(episodes: int, seed: int = 0):
@@ -80,8 +82,13 @@ def pixel_update_timer(cameras: int, size: int, stack: int, batch: int, repeats:
 
     cfg = get_config().replace(batch_size=batch)
     agent = cls.create(0, obs(1), np.zeros((1, 9), np.float32), cfg)
-    b = {"observations": obs(batch), "next_observations": obs(batch), "actions": rng.uniform(-1, 1, (batch, 9)).astype(np.float32),
-         "rewards": np.zeros(batch, np.float32), "masks": np.ones(batch, np.float32)}
+    b = {
+        "observations": obs(batch),
+        "next_observations": obs(batch),
+        "actions": rng.uniform(-1, 1, (batch, 9)).astype(np.float32),
+        "rewards": np.zeros(batch, np.float32),
+        "masks": np.ones(batch, np.float32),
+    }
     state = {"agent": agent}
 
     def timed() -> float:
@@ -116,8 +123,13 @@ def pixels(args) -> None:
     compress_s = time.perf_counter() - t
     n = sum(lengths)
     rng = np.random.default_rng(0)
-    common = {"actions": rng.uniform(-1, 1, (n, 9)).astype(np.float32), "rewards": np.zeros(n, np.float32),
-              "terminals": np.zeros(n, bool), "timeouts": np.zeros(n, bool), "observations/proprio": proprio}
+    common = {
+        "actions": rng.uniform(-1, 1, (n, 9)).astype(np.float32),
+        "rewards": np.zeros(n, np.float32),
+        "terminals": np.zeros(n, bool),
+        "timeouts": np.zeros(n, bool),
+        "observations/proprio": proprio,
+    }
     aligns = {k: "transition" for k in ("actions", "rewards", "terminals", "timeouts")}
     aligns.update({k: "step" for k in (*frames, "observations/proprio")})
     ds = Dataset({**common, **arrays}, aligns, np.array(lengths))
@@ -136,15 +148,23 @@ def pixels(args) -> None:
         update_t.append(update())
     packed_s, raw_s, update_s = (statistics.median(x) for x in (packed_t, raw_t, update_t))
     frames_n = sum(len(v) for v in frames.values())
-    print(f"randomized kitchen: {len(lengths)} play episodes, {frames_n} frames (3 cameras, 128x128), "
-          f"rendered at {frames_n / render_s:.0f} frames/s; compressed at {raw / compress_s / 1e6:.0f} MB/s")
-    print(f"raw {raw / 1e6:.1f} MB -> compressed {packed / 1e6:.1f} MB: size ratio {packed / raw:.3f} "
-          f"({raw / packed:.2f}x smaller; target ratio <= 0.2)")
-    print(f"pixel batch (batch {args.pixel_batch}, 3 stacked frames, {len(frames)} cameras, obs + next obs): "
-          f"compressed {1e3 * packed_s:.1f} ms | raw in RAM {1e3 * raw_s:.1f} ms")
+    print(
+        f"randomized kitchen: {len(lengths)} play episodes, {frames_n} frames (3 cameras, 128x128), "
+        f"rendered at {frames_n / render_s:.0f} frames/s; compressed at {raw / compress_s / 1e6:.0f} MB/s"
+    )
+    print(
+        f"raw {raw / 1e6:.1f} MB -> compressed {packed / 1e6:.1f} MB: size ratio {packed / raw:.3f} "
+        f"({raw / packed:.2f}x smaller; target ratio <= 0.2)"
+    )
+    print(
+        f"pixel batch (batch {args.pixel_batch}, 3 stacked frames, {len(frames)} cameras, obs + next obs): "
+        f"compressed {1e3 * packed_s:.1f} ms | raw in RAM {1e3 * raw_s:.1f} ms"
+    )
     print(f"pixel BC update (same batch shape, d5rl JAX): {1e3 * update_s:.0f} ms")
-    print(f"update / sample time: {update_s / packed_s:.1f}x (compressed), {update_s / raw_s:.1f}x (raw); "
-          f"target >= 10 (medians of {args.repeats} alternating repeats)")
+    print(
+        f"update / sample time: {update_s / packed_s:.1f}x (compressed), {update_s / raw_s:.1f}x (raw); "
+        f"target >= 10 (medians of {args.repeats} alternating repeats)"
+    )
     tmp.cleanup()
 
 
@@ -161,9 +181,9 @@ def main() -> None:
     if args.pixels:
         return pixels(args)
 
+    from d5rl.datasets.dataset import ChunkedArray, Dataset
     from d5rl.datasets.format import ShardWriter
     from d5rl.datasets.generation import _concat
-    from d5rl.datasets.dataset import ChunkedArray, Dataset
     from d5rl.datasets.loading import load_dataset
 
     tmp = None
@@ -178,7 +198,7 @@ def main() -> None:
         tmp = tempfile.TemporaryDirectory()
         parts: dict[str, list] = {}
         for s in range(0, len(eps), 16):
-            arrays, aligns = _concat(eps[s: s + 16])
+            arrays, aligns = _concat(eps[s : s + 16])
             w = ShardWriter(tmp.name, s // 16, lock_root=tmp.name)
             for k, v in arrays.items():
                 w.write(k, v)

@@ -30,12 +30,22 @@ def synthetic_task(gib: float):
     length, per_shard = 250, 16
     frame_bytes = 64 * 64 * 3 * 2  # two cameras
     episodes = max(1, int(gib * 2**30 / (frame_bytes * (length + 1))))
-    return register(TaskSpec(
-        id="bench-verify-v0", entry_point="tests.datasets.toy:ToyEnv", max_episode_steps=length,
-        description="synthetic frames for bench/dataset_verify.py",
-        dataset=DatasetSpec(name="bench-verify", version=1, generator="bench.dataset_verify:FrameGenerator",
-                            num_episodes=episodes, episodes_per_shard=per_shard, generator_kwargs={"length": length}),
-    )), Episode
+    return register(
+        TaskSpec(
+            id="bench-verify-v0",
+            entry_point="tests.datasets.toy:ToyEnv",
+            max_episode_steps=length,
+            description="synthetic frames for bench/dataset_verify.py",
+            dataset=DatasetSpec(
+                name="bench-verify",
+                version=1,
+                generator="bench.dataset_verify:FrameGenerator",
+                num_episodes=episodes,
+                episodes_per_shard=per_shard,
+                generator_kwargs={"length": length},
+            ),
+        )
+    ), Episode
 
 
 class FrameGenerator:
@@ -49,13 +59,19 @@ class FrameGenerator:
 
         t = self.length
         frames = rng.integers(0, 255, (t + 1, 64, 64, 3), dtype=np.uint8)
-        return Episode({
-            "observations/pixels/a": frames, "observations/pixels/b": frames[::-1].copy(),
-            "observations/proprio": rng.normal(size=(t + 1, 9)).astype(np.float32),
-            "states": rng.normal(size=(t + 1, 60)),
-            "actions": rng.uniform(-1, 1, (t, 9)).astype(np.float32), "rewards": np.zeros(t, np.float32),
-            "terminals": np.zeros(t, bool), "timeouts": np.eye(1, t, t - 1, dtype=bool)[0],
-        }, {})
+        return Episode(
+            {
+                "observations/pixels/a": frames,
+                "observations/pixels/b": frames[::-1].copy(),
+                "observations/proprio": rng.normal(size=(t + 1, 9)).astype(np.float32),
+                "states": rng.normal(size=(t + 1, 60)),
+                "actions": rng.uniform(-1, 1, (t, 9)).astype(np.float32),
+                "rewards": np.zeros(t, np.float32),
+                "terminals": np.zeros(t, bool),
+                "timeouts": np.eye(1, t, t - 1, dtype=bool)[0],
+            },
+            {},
+        )
 
 
 def timed(fn, repeats: int) -> float:
@@ -106,12 +122,16 @@ def main() -> None:
         t_none = timed(load, args.repeats)
     finally:
         fmt.check_shard = real_check
-    print(f"dataset: {ds.metadata.get('task_id')}; {ds.num_episodes} episodes, {len(list((root / 'shards').iterdir()))} "
-          f"shards, {size / 2**30:.2f} GiB of arrays")
+    print(
+        f"dataset: {ds.metadata.get('task_id')}; {ds.num_episodes} episodes, {len(list((root / 'shards').iterdir()))} "
+        f"shards, {size / 2**30:.2f} GiB of arrays"
+    )
     print(f"load, no integrity check (baseline)     : {t_none * 1e3:9.1f} ms")
     print(f"load, verification stamps (every load)  : {t_stamp * 1e3:9.1f} ms   ratio {t_stamp / t_none:.2f}")
-    print(f"load, every shard re-hashed (first load): {t_hash * 1e3:9.1f} ms   ratio {t_hash / t_none:.2f}  "
-          f"({size / 2**20 / max(t_hash - t_none, 1e-9):.0f} MiB/s hashed)")
+    print(
+        f"load, every shard re-hashed (first load): {t_hash * 1e3:9.1f} ms   ratio {t_hash / t_none:.2f}  "
+        f"({size / 2**20 / max(t_hash - t_none, 1e-9):.0f} MiB/s hashed)"
+    )
     if tmp is not None:
         tmp.cleanup()
 

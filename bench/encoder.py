@@ -64,9 +64,11 @@ def jax_layer(batch, size, cin, cout, rng):
     fwd = jax.jit(conv)
     dx = jax.jit(lambda x, w, dy: jax.vjp(lambda x: conv(x, w), x)[1](dy)[0])
     dw = jax.jit(lambda x, w, dy: jax.vjp(lambda w: conv(x, w), w)[1](dy)[0])
-    return {"fwd": lambda: fwd(x, w).block_until_ready(),
-            "dx": lambda: dx(x, w, dy).block_until_ready(),
-            "dw": lambda: dw(x, w, dy).block_until_ready()}
+    return {
+        "fwd": lambda: fwd(x, w).block_until_ready(),
+        "dx": lambda: dx(x, w, dy).block_until_ready(),
+        "dw": lambda: dw(x, w, dy).block_until_ready(),
+    }
 
 
 def torch_layer(batch, size, cin, cout, rng):
@@ -79,11 +81,15 @@ def torch_layer(batch, size, cin, cout, rng):
     dy = torch.from_numpy(rng.standard_normal((batch, cout, size, size), dtype=np.float32)).contiguous(memory_format=cl)
 
     def backward(mask):
-        return lambda: torch.ops.aten.convolution_backward(dy, x, w, [cout], [1, 1], [1, 1], [1, 1], False, [0, 0],
-                                                           1, mask)
+        return lambda: torch.ops.aten.convolution_backward(
+            dy, x, w, [cout], [1, 1], [1, 1], [1, 1], False, [0, 0], 1, mask
+        )
 
-    return {"fwd": lambda: F.conv2d(x, w, padding=1), "dx": backward([True, False, False]),
-            "dw": backward([False, True, True])}
+    return {
+        "fwd": lambda: F.conv2d(x, w, padding=1),
+        "dx": backward([True, False, False]),
+        "dw": backward([False, True, True]),
+    }
 
 
 def jax_encoder(batch, rng):
@@ -101,7 +107,6 @@ def jax_encoder(batch, rng):
 
 def torch_encoder(batch, rng, channels_last: bool):
     import torch
-
     from torch_reference import torch_impala  # the reference encoder bench/agents.py times
 
     net = torch_impala()(3 * STACK * CAMS)
@@ -124,8 +129,9 @@ def main(argv=None) -> int:
     p.add_argument("--torch-threads", type=int, default=0, help="torch intra-op threads; 0 = all CPUs")
     args = p.parse_args(argv)
 
-    import d5rl  # noqa: F401  (sets d5rl's XLA flags before JAX starts)
     import jax
+
+    import d5rl  # noqa: F401  (sets d5rl's XLA flags before JAX starts)
 
     try:
         import torch
@@ -142,8 +148,10 @@ def main(argv=None) -> int:
                 t.append(timer(fn, args.seconds))
         return [statistics.median(t) * 1e3 for t in times]
 
-    print(f"# {platform.processor() or platform.machine()}, {os.cpu_count()} CPUs, jax {jax.__version__}, "
-          f"torch {torch.__version__} ({torch.get_num_threads()} threads), batch {args.batch}, ms per call")
+    print(
+        f"# {platform.processor() or platform.machine()}, {os.cpu_count()} CPUs, jax {jax.__version__}, "
+        f"torch {torch.__version__} ({torch.get_num_threads()} threads), batch {args.batch}, ms per call"
+    )
     print(f"{'conv':22s} {'n':>2s} {'pass':4s} {'jax':>8s} {'torch':>8s} {'ratio':>6s}")
     total_j = total_t = 0.0
     first = True
@@ -156,12 +164,15 @@ def main(argv=None) -> int:
                 continue  # the input image needs no gradient
             j, t = med([jl[name], tl[name]])
             total_j, total_t = total_j + n * j, total_t + n * t
-            print(f"{size:3d}x{size:<3d} {cin:2d}->{cout:<2d} 3x3    {n:2d} {name:4s} {j:8.2f} {t:8.2f} {t / j:6.2f}",
-                  flush=True)
+            print(
+                f"{size:3d}x{size:<3d} {cin:2d}->{cout:<2d} 3x3    {n:2d} {name:4s} {j:8.2f} {t:8.2f} {t / j:6.2f}",
+                flush=True,
+            )
         first = False
     print(f"{'all convolutions':27s} {'':4s} {total_j:8.1f} {total_t:8.1f} {total_t / total_j:6.2f}")
-    j, t, t_nchw = med([jax_encoder(args.batch, rng), torch_encoder(args.batch, rng, True),
-                        torch_encoder(args.batch, rng, False)])
+    j, t, t_nchw = med(
+        [jax_encoder(args.batch, rng), torch_encoder(args.batch, rng, True), torch_encoder(args.batch, rng, False)]
+    )
     print(f"{'encoder fwd+grad':27s} {'':4s} {j:8.1f} {t:8.1f} {t / j:6.2f}")
     print(f"{'  vs torch NCHW':27s} {'':4s} {j:8.1f} {t_nchw:8.1f} {t_nchw / j:6.2f}")
     return 0

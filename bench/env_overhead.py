@@ -74,8 +74,10 @@ def main() -> None:
         r_raw.append(raw())
         r_ours.append(ours(record=False)[0])
     o, r = float(np.median(r_ours)), float(np.median(r_raw))
-    print(f"task {args.task}: {base.frame_skip} physics steps of {model.opt.timestep * 1e3:.1f} ms per env step, "
-          f"{args.steps} steps, {len(starts)} episodes, median of {args.repeats}")
+    print(
+        f"task {args.task}: {base.frame_skip} physics steps of {model.opt.timestep * 1e3:.1f} ms per env step, "
+        f"{args.steps} steps, {len(starts)} episodes, median of {args.repeats}"
+    )
     print(f"raw mj_step, same states and controls : {r:8.0f} control steps/s ({r * base.frame_skip:.0f} mj_step/s)")
     print(f"d5rl env.step                         : {o:8.0f} env steps/s")
     print(f"ratio ours/raw                        : {o / r:.3f}  (overhead {100 * (1 - o / r):.1f}%)")

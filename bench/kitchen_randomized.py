@@ -36,8 +36,10 @@ def main():
     rnd.reset(seed=0)
     step_r = rate(lambda i: rnd.step(act), 500)
     vs_episode = (1 / rnd_r) / (500 / step_r)
-    print(f"resets/s  standard {std_r:.1f} | randomized (new domain) {rnd_r:.2f}; one randomized reset takes "
-          f"{vs_episode:.2f}x the time of 500 of its state steps ({step_r:.0f} steps/s)")
+    print(
+        f"resets/s  standard {std_r:.1f} | randomized (new domain) {rnd_r:.2f}; one randomized reset takes "
+        f"{vs_episode:.2f}x the time of 500 of its state steps ({step_r:.0f} steps/s)"
+    )
     stdp = KitchenEnv(image_size=128)
     rndp = RandomizedKitchenEnv(image_size=128)
     stdp.reset(seed=0)

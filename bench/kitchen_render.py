@@ -12,9 +12,9 @@ import argparse
 import platform
 import time
 
-import d5rl  # noqa: F401  (sets MUJOCO_GL)
 import mujoco
 
+import d5rl  # noqa: F401  (sets MUJOCO_GL)
 from d5rl.envs.kitchen import model as km
 from d5rl.rendering import make_renderer
 
@@ -48,7 +48,9 @@ def main() -> None:
     for cam in ("overview", "wrist"):
         f_stock = fps(stock, args.size, args.stock_frames, cam)
         f_ours = fps(ours, args.size, args.frames, cam)
-        print(f"{cam:9s} {args.size}x{args.size}: ours {f_ours:7.1f} fps | stock {f_stock:6.2f} fps | x{f_ours / f_stock:.0f}")
+        print(
+            f"{cam:9s} {args.size}x{args.size}: ours {f_ours:7.1f} fps | stock {f_stock:6.2f} fps | x{f_ours / f_stock:.0f}"
+        )
 
 
 if __name__ == "__main__":

@@ -78,9 +78,11 @@ def main() -> None:
             jax.device_get(info)
         update_s.append((time.perf_counter() - t) / 5)
     med = statistics.median
-    print(f"{args.task} {settings.algo} batch {n}, {jax.devices()[0].platform}, {os.cpu_count()} cores: "
-          f"sample {med(sample_s) * 1e3:.0f} ms, update {med(update_s) * 1e3:.0f} ms; step inline "
-          f"{med(inline) * 1e3:.0f} ms, gathered ahead {med(ahead) * 1e3:.0f} ms")
+    print(
+        f"{args.task} {settings.algo} batch {n}, {jax.devices()[0].platform}, {os.cpu_count()} cores: "
+        f"sample {med(sample_s) * 1e3:.0f} ms, update {med(update_s) * 1e3:.0f} ms; step inline "
+        f"{med(inline) * 1e3:.0f} ms, gathered ahead {med(ahead) * 1e3:.0f} ms"
+    )
     print(f"gathered ahead vs inline: {med(inline) / med(ahead):.2f}x")
 
 

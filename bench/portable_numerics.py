@@ -50,8 +50,14 @@ def environments() -> dict[str, dict[str, str]]:
 
 
 def measure(task: str, episodes: int, env: dict[str, str]) -> dict:
-    out = subprocess.run([sys.executable, "-c", CHILD, task, str(episodes)], env=env, capture_output=True,
-                         text=True, check=True, cwd=REPO)
+    out = subprocess.run(
+        [sys.executable, "-c", CHILD, task, str(episodes)],
+        env=env,
+        capture_output=True,
+        text=True,
+        check=True,
+        cwd=REPO,
+    )
     return json.loads(out.stdout.strip().splitlines()[-1])
 
 
@@ -77,8 +83,11 @@ def main() -> None:
                 runs[mode].append(r)
         t = {m: statistics.median(r["s"] for r in rs) for m, rs in runs.items()}
         same = runs["native"][0]["digest"] == runs["portable"][0]["digest"]
-        print(f"{task:34s} {t['native']:9.2f} {t['portable']:11.2f} {t['portable'] / t['native']:6.2f}  "
-              f"{'yes' if same else 'no'}", flush=True)
+        print(
+            f"{task:34s} {t['native']:9.2f} {t['portable']:11.2f} {t['portable'] / t['native']:6.2f}  "
+            f"{'yes' if same else 'no'}",
+            flush=True,
+        )
 
 
 if __name__ == "__main__":

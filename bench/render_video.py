@@ -22,11 +22,11 @@ import time
 
 sys.path.insert(0, os.path.dirname(os.path.dirname(os.path.abspath(__file__))))
 
-import d5rl  # noqa: E402,F401  (sets MUJOCO_GL)
-import numpy as np  # noqa: E402
+import numpy as np
 
-from d5rl.registry import make_env  # noqa: E402
-from d5rl.video import rollout_frames, write_video  # noqa: E402
+import d5rl  # noqa: F401  (sets MUJOCO_GL)
+from d5rl.registry import make_env
+from d5rl.video import rollout_frames, write_video
 
 
 def old_render(task: str, steps: int, seed: int, out: str) -> int:
@@ -69,15 +69,17 @@ def main() -> None:
     p.add_argument("--frames", type=int, default=40)
     p.add_argument("--seed", type=int, default=0)
     args = p.parse_args()
-    print(f"{platform.processor() or platform.machine()}, {os.cpu_count()} cores, "
-          f"MUJOCO_GL={os.environ.get('MUJOCO_GL')}")
+    print(
+        f"{platform.processor() or platform.machine()}, {os.cpu_count()} cores, MUJOCO_GL={os.environ.get('MUJOCO_GL')}"
+    )
     with tempfile.TemporaryDirectory() as d:
         steps = args.frames - 1
         new_render(args.task, 2, args.seed, os.path.join(d, "warm.mp4"))  # GL and ffmpeg start-up, once
         old = timed(old_render, args.task, steps, args.seed, os.path.join(d, "old.mp4"))
         new = timed(new_render, args.task, steps, args.seed, os.path.join(d, "new.mp4"))
-    print(f"{args.task}, {args.frames} frames: old {old:.2f} frames/s, new {new:.2f} frames/s, "
-          f"new/old {new / old:.1f}x")
+    print(
+        f"{args.task}, {args.frames} frames: old {old:.2f} frames/s, new {new:.2f} frames/s, new/old {new / old:.1f}x"
+    )
 
 
 if __name__ == "__main__":

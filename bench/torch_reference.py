@@ -29,8 +29,11 @@ def torch_impala():
             super().__init__()
             self.stacks = nn.ModuleList()
             for ch in chans:
-                self.stacks.append(nn.ModuleList([nn.Conv2d(in_ch, ch, 3, padding=1)] +
-                                                 [nn.Conv2d(ch, ch, 3, padding=1) for _ in range(4)]))
+                self.stacks.append(
+                    nn.ModuleList(
+                        [nn.Conv2d(in_ch, ch, 3, padding=1)] + [nn.Conv2d(ch, ch, 3, padding=1) for _ in range(4)]
+                    )
+                )
                 in_ch = ch
 
         def forward(self, x):
@@ -224,8 +227,12 @@ def make_kit(pixels: bool) -> SimpleNamespace:
             self.fw = nn.Parameter(torch.randn(32, 1) * 0.2)
             self.tmlp = MLP((64, 128, 128), act=nn.SiLU)
             self.inp = nn.Linear(self.enc.out_dim + a_dim + 128, 256)
-            self.blocks = nn.ModuleList([nn.ModuleList([nn.Dropout(0.1), nn.LayerNorm(256), nn.Linear(256, 1024),
-                                                        nn.Linear(1024, 256)]) for _ in range(3)])
+            self.blocks = nn.ModuleList(
+                [
+                    nn.ModuleList([nn.Dropout(0.1), nn.LayerNorm(256), nn.Linear(256, 1024), nn.Linear(1024, 256)])
+                    for _ in range(3)
+                ]
+            )
             self.out = nn.Linear(256, a_dim)
 
         def forward(self, obs, x, t):
@@ -261,10 +268,28 @@ def make_kit(pixels: bool) -> SimpleNamespace:
         eps = model(obs, ah.sqrt() * a + (1 - ah).sqrt() * noise, t.float().unsqueeze(-1))
         return ((eps - noise) ** 2).sum(-1).mean()
 
-    return SimpleNamespace(torch=torch, nn=nn, F=F, MLP=MLP, Encoder=Encoder, a_dim=a_dim, H=H, augment=augment,
-                           Critic=Critic, Value=Value, Gauss=Gauss, Det=Det, Field=Field, Noise=Noise,
-                           normal_logp=normal_logp,
-                           tanh_sample=tanh_sample, soft=soft, adam=adam, step=step, ddpm_loss=ddpm_loss)
+    return SimpleNamespace(
+        torch=torch,
+        nn=nn,
+        F=F,
+        MLP=MLP,
+        Encoder=Encoder,
+        a_dim=a_dim,
+        H=H,
+        augment=augment,
+        Critic=Critic,
+        Value=Value,
+        Gauss=Gauss,
+        Det=Det,
+        Field=Field,
+        Noise=Noise,
+        normal_logp=normal_logp,
+        tanh_sample=tanh_sample,
+        soft=soft,
+        adam=adam,
+        step=step,
+        ddpm_loss=ddpm_loss,
+    )
 
 
 # --- one builder per algorithm: (kit) -> (networks, update(batch)) ------------------------------------------
@@ -279,6 +304,7 @@ def bc(k):
     def update(b):
         mu, ls = nets["actor"](k.augment(b["observations"]))
         k.step(opt, -k.normal_logp(b["actions"], mu, ls).mean())
+
     return nets, update
 
 
@@ -307,6 +333,7 @@ def _iql_like(k, diffusion: bool):
         if diffusion:
             k.step(opts["actor"], k.ddpm_loss(nets["actor"], b["observations"], b["actions"]))
         k.soft(tgt, nets["critic"])
+
     return nets, update
 
 
@@ -351,6 +378,7 @@ def _td3_like(k, rebrac: bool):
             k.step(opts["actor"], loss)
             k.soft(ta, nets["actor"])
             k.soft(tc, nets["critic"])
+
     return nets, update
 
 
@@ -369,8 +397,11 @@ def _sac_like(k, name: str):
     nets = {"actor": k.Gauss(True, lmin=-20.0), "critic": k.Critic(10 if rlpd else 2, ln=rlpd)}
     tc = copy.deepcopy(nets["critic"])
     log_t = torch.zeros((), requires_grad=True)
-    opts = {"actor": k.adam(nets["actor"], 3e-4 if rlpd else 1e-4), "critic": k.adam(nets["critic"]),
-            "temp": torch.optim.Adam([log_t], lr=3e-4)}
+    opts = {
+        "actor": k.adam(nets["actor"], 3e-4 if rlpd else 1e-4),
+        "critic": k.adam(nets["critic"]),
+        "temp": torch.optim.Adam([log_t], lr=3e-4),
+    }
     target_ent = -a_dim / 2 if rlpd else -a_dim
     utd = 20 if rlpd else 1
 
@@ -423,11 +454,18 @@ def _sac_like(k, name: str):
         if not rlpd:
             actor_step(b)
         for i in range(utd):
-            mb = {key: ({kk: vv[i * bs:(i + 1) * bs] for kk, vv in v.items()} if isinstance(v, dict)
-                        else v[i * bs:(i + 1) * bs]) for key, v in b.items()}
+            mb = {
+                key: (
+                    {kk: vv[i * bs : (i + 1) * bs] for kk, vv in v.items()}
+                    if isinstance(v, dict)
+                    else v[i * bs : (i + 1) * bs]
+                )
+                for key, v in b.items()
+            }
             critic_step(mb)
         if rlpd:
             actor_step(mb)
+
     return nets, update
 
 
@@ -451,6 +489,7 @@ def ddpm_bc(k):
     def update(b):
         k.step(opt, k.ddpm_loss(nets["actor"], k.augment(b["observations"]), b["actions"]))
         k.soft(ema, nets["actor"], 0.001)
+
     return nets, update
 
 
@@ -482,6 +521,7 @@ def fql(k):
         q = nets["critic"](obs, mu.clamp(-1, 1)).mean(0)
         k.step(opts["actor"], 10.0 * ((mu - x) ** 2).mean() - q.mean())
         k.soft(tc, nets["critic"])
+
     return nets, update
 
 
@@ -501,8 +541,10 @@ def torch_runner(name: str, pixels: bool, make_batch, batch_size: int):
     bs = batch_size * BATCH_MULTIPLIER.get(name, 1)
 
     def to_t(b):
-        return {key: ({kk: torch.from_numpy(vv) for kk, vv in v.items()} if isinstance(v, dict)
-                      else torch.from_numpy(v)) for key, v in b.items()}
+        return {
+            key: ({kk: torch.from_numpy(vv) for kk, vv in v.items()} if isinstance(v, dict) else torch.from_numpy(v))
+            for key, v in b.items()
+        }
 
     batches = [to_t(make_batch(bs, pixels, rng)) for _ in range(2)]
     state = {"i": 0}

@@ -18,16 +18,15 @@ import sys
 
 sys.path.insert(0, os.path.dirname(os.path.dirname(os.path.abspath(__file__))))
 
-from bench.timing import rate  # noqa: E402
+import mujoco
+import numpy as np
 
-import d5rl  # noqa: E402,F401  (sets MUJOCO_GL)
-import mujoco  # noqa: E402
-import numpy as np  # noqa: E402
-
-from d5rl.envs.widowx import domain as wdom  # noqa: E402
-from d5rl.envs.widowx import model as wm  # noqa: E402
-from d5rl.envs.widowx.data import render_states  # noqa: E402
-from d5rl.envs.widowx.task import WidowXSortingEnv  # noqa: E402
+import d5rl  # noqa: F401  (sets MUJOCO_GL)
+from bench.timing import rate
+from d5rl.envs.widowx import domain as wdom
+from d5rl.envs.widowx import model as wm
+from d5rl.envs.widowx.data import render_states
+from d5rl.envs.widowx.task import WidowXSortingEnv
 
 
 def stock_model() -> mujoco.MjModel:
@@ -75,8 +74,10 @@ def main() -> None:
     meta = {"domain": domain.to_json()}
     rerender = rate(lambda: render_states(states, meta, size=args.size), args.seconds) * len(states)
 
-    print(f"machine: {platform.processor() or platform.machine()}, {os.cpu_count()} cpus, "
-          f"MUJOCO_GL={os.environ.get('MUJOCO_GL')}, mujoco {mujoco.__version__}")
+    print(
+        f"machine: {platform.processor() or platform.machine()}, {os.cpu_count()} cpus, "
+        f"MUJOCO_GL={os.environ.get('MUJOCO_GL')}, mujoco {mujoco.__version__}"
+    )
     print(f"side camera {args.size}x{args.size}:")
     print(f"  stock settings   {results['stock']:8.1f} fps")
     print(f"  d5rl settings    {results['d5rl']:8.1f} fps   ({results['d5rl'] / results['stock']:.2f}x stock)")

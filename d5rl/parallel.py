@@ -45,9 +45,10 @@ import time
 import traceback
 import types
 import uuid
+from collections.abc import Callable, Sequence
 from dataclasses import dataclass
 from pathlib import Path
-from typing import Any, Callable, Sequence
+from typing import Any
 
 from d5rl.errors import D5RLError, MissingDependencyError, is_int
 from d5rl.xla_flags import SINGLE_THREAD, add_xla_flags
@@ -69,8 +70,10 @@ def check_workers(workers: Workers) -> None:
     if workers is None or isinstance(workers, Ray):
         return
     if not is_int(workers, lo=1):
-        raise D5RLError(f"workers must be a positive number of processes, got {workers!r}",
-                        "omit --workers to use every core, or pass --workers 1 to run in this process")
+        raise D5RLError(
+            f"workers must be a positive number of processes, got {workers!r}",
+            "omit --workers to use every core, or pass --workers 1 to run in this process",
+        )
 
 
 # Environment of a worker: one compute thread per process, so K workers use K cores.
@@ -113,6 +116,7 @@ def die_with_parent(parent_pid: int | None = None) -> None:
                 os._exit(1)
 
     threading.Thread(target=watch, daemon=True, name="d5rl-parent-watchdog").start()
+
 
 # --- worker side: where report() sends to --------------------------------------------------------------
 _SINK: Callable[[Any], None] | None = None
@@ -291,8 +295,15 @@ def _run_pool(fn, jobs, n, initializer, initargs, on_message, settle, worker_env
         tasks.put((i, job))
     for _ in range(n):
         tasks.put(None)
-    procs = [ctx.Process(target=_pool_worker, args=(tasks, results, fn, initializer, initargs, os.getpid()),
-                         daemon=True, name=f"d5rl-worker-{k}") for k in range(n)]
+    procs = [
+        ctx.Process(
+            target=_pool_worker,
+            args=(tasks, results, fn, initializer, initargs, os.getpid()),
+            daemon=True,
+            name=f"d5rl-worker-{k}",
+        )
+        for k in range(n)
+    ]
     with _without_main_script(not needs_main(fn, initializer, initargs, jobs)), _environ(worker_env):
         for p in procs:
             p.start()
@@ -304,9 +315,11 @@ def _run_pool(fn, jobs, n, initializer, initargs, on_message, settle, worker_env
             except queue_mod.Empty:
                 dead = [p for p in procs if p.exitcode not in (None, 0)]
                 if dead:
-                    raise D5RLError(f"a worker process died (exit code {dead[0].exitcode}) before finishing its job",
-                                    "its error, if it had time to print one, is above; otherwise look for an "
-                                    "out-of-memory kill (dmesg); run the same command again to resume")
+                    raise D5RLError(
+                        f"a worker process died (exit code {dead[0].exitcode}) before finishing its job",
+                        "its error, if it had time to print one, is above; otherwise look for an "
+                        "out-of-memory kill (dmesg); run the same command again to resume",
+                    ) from None
                 continue
             if kind == "msg":
                 if on_message is not None:
@@ -354,13 +367,17 @@ def connect_ray(address: str | None):
             else:
                 ray.init(address=address or "auto", log_to_driver=False)
         except ConnectionError as e:
-            raise D5RLError(f"cannot reach a Ray cluster at {address or 'auto'} ({e})",
-                            "start one with `ray start --head` or pass --ray ADDRESS of a running head node") from e
+            raise D5RLError(
+                f"cannot reach a Ray cluster at {address or 'auto'} ({e})",
+                "start one with `ray start --head` or pass --ray ADDRESS of a running head node",
+            ) from e
         except ValueError as e:
             if "ray[client]" not in str(e):
                 raise
-            raise MissingDependencyError(f"--ray {address} connects through Ray Client, which is not installed",
-                                         "pip install 'ray[client]', or run on the head node with --ray auto") from None
+            raise MissingDependencyError(
+                f"--ray {address} connects through Ray Client, which is not installed",
+                "pip install 'ray[client]', or run on the head node with --ray auto",
+            ) from None
     return ray
 
 

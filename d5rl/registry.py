@@ -19,7 +19,8 @@ import difflib
 import importlib
 import pkgutil
 import re
-from typing import Any, Callable
+from collections.abc import Callable
+from typing import Any
 
 from d5rl.errors import TaskIdError, UnknownTaskError
 
@@ -84,6 +85,7 @@ class DatasetSpec:
     def producer(self) -> str:
         """The code that writes this dataset: its generator, or its importer."""
         return self.generator if self.generator is not None else self.importer
+
     # "portable": generation workers pin CPU-independent kernels (d5rl.numerics), so the bytes are the
     # same on every x86-64 machine; "native": each CPU's fastest kernels (bytes may differ across CPUs).
     # Not part of the dataset's identity: a dataset adopts "portable" at a new version unless its bytes
@@ -184,9 +186,17 @@ def register(spec: TaskSpec) -> TaskSpec:
     _REGISTRY[spec.id] = spec
     _register_with_gymnasium(spec)
     for name, dspec in spec.dataset_variants.items():
-        register(dataclasses.replace(
-            spec, id=variant_id(spec.id, name), dataset=dspec, dataset_variants={}, variant=name,
-            variant_of=spec.id, description=f"{spec.description}; dataset variant {name!r} ({dspec.name})"))
+        register(
+            dataclasses.replace(
+                spec,
+                id=variant_id(spec.id, name),
+                dataset=dspec,
+                dataset_variants={},
+                variant=name,
+                variant_of=spec.id,
+                description=f"{spec.description}; dataset variant {name!r} ({dspec.name})",
+            )
+        )
     return spec
 
 

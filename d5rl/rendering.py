@@ -8,10 +8,10 @@ from __future__ import annotations
 
 import os
 
-import d5rl.envs  # noqa: F401  (the MUJOCO_GL default, before mujoco is imported)
-import mujoco  # noqa: E402
+import mujoco
 import numpy as np
 
+import d5rl.envs
 from d5rl.errors import RenderBackendError
 
 _HINT = (

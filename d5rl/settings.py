@@ -22,8 +22,9 @@ from __future__ import annotations
 import dataclasses
 import functools
 import json
+from collections.abc import Iterable, Mapping
 from pathlib import Path
-from typing import Any, Iterable, Mapping
+from typing import Any
 
 SETTINGS_PATH = Path(__file__).resolve().parent / "configs" / "settings.json"
 
@@ -72,12 +73,25 @@ class Resolved:
     online_steps: int
 
     def to_json(self) -> dict:
-        return {"algo": self.algo, "task_id": self.task_id, "offline_steps": self.offline_steps,
-                "online_steps": self.online_steps, "agent": self.agent.to_dict(), "train": self.train.to_dict()}
+        return {
+            "algo": self.algo,
+            "task_id": self.task_id,
+            "offline_steps": self.offline_steps,
+            "online_steps": self.online_steps,
+            "agent": self.agent.to_dict(),
+            "train": self.train.to_dict(),
+        }
 
 
-def resolve(algo: str, task_id: str, overrides: Iterable[str] | Mapping[str, Any] | None = None, *,
-            offline_steps: int = 0, online_steps: int = 0, tuned: bool = True) -> Resolved:
+def resolve(
+    algo: str,
+    task_id: str,
+    overrides: Iterable[str] | Mapping[str, Any] | None = None,
+    *,
+    offline_steps: int = 0,
+    online_steps: int = 0,
+    tuned: bool = True,
+) -> Resolved:
     """The agent and training-loop configs of one run (``tuned=False``: the agent's own defaults)."""
     from d5rl.agents import get_agent
     from d5rl.agents.config import AGENT_BOUNDS, check_bounds

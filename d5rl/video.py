@@ -10,8 +10,8 @@ Agents' camera observations never go through here: they keep the env's own rende
 
 from __future__ import annotations
 
+from collections.abc import Iterable
 from pathlib import Path
-from typing import Iterable
 
 import numpy as np
 
@@ -28,15 +28,18 @@ def check_video_path(path: str | Path) -> Path:
 
     path = Path(path).expanduser()
     if path.suffix.lower() not in VIDEO_SUFFIXES:
-        raise D5RLError(f"cannot write a video to {path}: {path.suffix or 'no suffix'} is not one of "
-                        f"{', '.join(VIDEO_SUFFIXES)}", f"pass e.g. {path.with_suffix('.mp4')}")
+        raise D5RLError(
+            f"cannot write a video to {path}: {path.suffix or 'no suffix'} is not one of {', '.join(VIDEO_SUFFIXES)}",
+            f"pass e.g. {path.with_suffix('.mp4')}",
+        )
     try:
         path.parent.mkdir(parents=True, exist_ok=True)
         if not os.access(path.parent, os.W_OK):
             raise PermissionError(13, "Permission denied")
     except OSError as e:
-        raise D5RLError(f"cannot write a video to {path} ({e.strerror or e})",
-                        "pass a path in a writable directory") from None
+        raise D5RLError(
+            f"cannot write a video to {path} ({e.strerror or e})", "pass a path in a writable directory"
+        ) from None
     return path
 
 

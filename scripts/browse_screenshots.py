@@ -22,8 +22,16 @@ import tempfile
 from PIL import Image
 from playwright.sync_api import sync_playwright
 
-ARGS = ["--headless", "--no-sandbox", "--disable-gpu", "--disable-quic", "--no-first-run",
-        "--disable-background-networking", "--disable-component-update", "--disable-sync"]
+ARGS = [
+    "--headless",
+    "--no-sandbox",
+    "--disable-gpu",
+    "--disable-quic",
+    "--no-first-run",
+    "--disable-background-networking",
+    "--disable-component-update",
+    "--disable-sync",
+]
 
 
 def main() -> None:
@@ -37,8 +45,13 @@ def main() -> None:
     p.add_argument("--colors", type=int, default=128, help="palette size of the PNG (smaller file)")
     args = p.parse_args()
     with tempfile.TemporaryDirectory() as profile, sync_playwright() as pw:
-        ctx = pw.chromium.launch_persistent_context(profile, executable_path=shutil.which("chromium"), headless=True,
-                                                    args=ARGS, viewport={"width": args.width, "height": args.height})
+        ctx = pw.chromium.launch_persistent_context(
+            profile,
+            executable_path=shutil.which("chromium"),
+            headless=True,
+            args=ARGS,
+            viewport={"width": args.width, "height": args.height},
+        )
         page = ctx.new_page()
         page.set_default_timeout(120_000)
         page.goto(args.url)

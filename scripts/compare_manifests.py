@@ -23,10 +23,12 @@ def compare(mine: dict, ref: dict) -> str:
         if bad:
             differing.append(i)
             first = first or bad[0]
-    return (f"{mine['dataset']}: {len(mine['shards'])}/{len(ref['shards'])} shards compared, {same} arrays "
-            f"byte-identical, shards with differences {differing or 'none'} (first array: {first}); "
-            f"transitions {mine['num_transitions']} vs {ref['num_transitions']}; "
-            f"packages {mine.get('packages')} vs {ref.get('packages')}")
+    return (
+        f"{mine['dataset']}: {len(mine['shards'])}/{len(ref['shards'])} shards compared, {same} arrays "
+        f"byte-identical, shards with differences {differing or 'none'} (first array: {first}); "
+        f"transitions {mine['num_transitions']} vs {ref['num_transitions']}; "
+        f"packages {mine.get('packages')} vs {ref.get('packages')}"
+    )
 
 
 if __name__ == "__main__":

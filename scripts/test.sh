@@ -4,4 +4,7 @@
 set -euo pipefail
 cd "$(dirname "$0")/.."
 source scripts/install.sh train,test
+# lint and format first (settings in pyproject.toml; `ruff format .` and `ruff check --fix .` repair most findings)
+ruff check --quiet .
+ruff format --check --quiet .
 python -m pytest -n 2 -q "$@"

@@ -20,15 +20,18 @@ def one_line_error(capsys, argv, *needles):
     return last
 
 
-@pytest.mark.parametrize("argv, needle", [
-    (["--seed", "-1"], "dataset seed must be an integer"),
-    (["--episodes", "1000000000000"], f"has {N} episodes"),
-    (["--episodes", str(N + 1)], f"ask for 1 to {N} episodes"),
-    (["--episodes", "0"], f"has {N} episodes"),
-    (["--episodes", "-5"], f"has {N} episodes"),
-    (["--workers", "0"], "workers must be a positive number"),
-    (["--workers", "-2"], "workers must be a positive number"),
-])
+@pytest.mark.parametrize(
+    "argv, needle",
+    [
+        (["--seed", "-1"], "dataset seed must be an integer"),
+        (["--episodes", "1000000000000"], f"has {N} episodes"),
+        (["--episodes", str(N + 1)], f"ask for 1 to {N} episodes"),
+        (["--episodes", "0"], f"has {N} episodes"),
+        (["--episodes", "-5"], f"has {N} episodes"),
+        (["--workers", "0"], "workers must be a positive number"),
+        (["--workers", "-2"], "workers must be a positive number"),
+    ],
+)
 def test_generate_arguments(capsys, argv, needle):
     one_line_error(capsys, ["generate", "a1-walk-v0", *argv], needle)
     assert not paths.home().exists()  # refused before anything was created
@@ -76,8 +79,10 @@ def test_full_disk_for_real_on_a_tiny_tmpfs(capsys, tmp_path, monkeypatch):
 
     mnt = tmp_path / "tiny"
     mnt.mkdir()
-    if subprocess.run(["mount", "-t", "tmpfs", "-o", "size=256k", "tmpfs", str(mnt)],
-                      capture_output=True).returncode != 0:
+    if (
+        subprocess.run(["mount", "-t", "tmpfs", "-o", "size=256k", "tmpfs", str(mnt)], capture_output=True).returncode
+        != 0
+    ):
         pytest.skip("cannot mount a tmpfs here (needs root in a privileged container)")
     try:
         spec = register_toy("tiny", num_episodes=400, per_shard=200)
@@ -87,54 +92,72 @@ def test_full_disk_for_real_on_a_tiny_tmpfs(capsys, tmp_path, monkeypatch):
         subprocess.run(["umount", str(mnt)])
 
 
-@pytest.mark.parametrize("setting, needle", [
-    ("dataset_episodes=abc", "dataset_episodes='abc' is invalid"),
-    ("dataset_episodes=-5", "dataset_episodes=-5 is invalid"),
-    ("dataset_episodes=[1,2]", "dataset_episodes=(1, 2) is invalid"),
-    ("eval_episodes=0", "eval_episodes=0 is invalid"),
-    ("batch_size=0", "batch_size=0 is invalid"),
-    ("actor_lr=-1e-4", "actor_lr=-0.0001 is invalid"),
-    ("discount=1.5", "discount=1.5 is invalid"),
-    ("offline_ratio=2", "it must be a number >= 0 and <= 1 or none"),
-    ("hidden_dims=0,3", "hidden_dims=(0, 3) is invalid"),
-])
+@pytest.mark.parametrize(
+    "setting, needle",
+    [
+        ("dataset_episodes=abc", "dataset_episodes='abc' is invalid"),
+        ("dataset_episodes=-5", "dataset_episodes=-5 is invalid"),
+        ("dataset_episodes=[1,2]", "dataset_episodes=(1, 2) is invalid"),
+        ("eval_episodes=0", "eval_episodes=0 is invalid"),
+        ("batch_size=0", "batch_size=0 is invalid"),
+        ("actor_lr=-1e-4", "actor_lr=-0.0001 is invalid"),
+        ("discount=1.5", "discount=1.5 is invalid"),
+        ("offline_ratio=2", "it must be a number >= 0 and <= 1 or none"),
+        ("hidden_dims=0,3", "hidden_dims=(0, 3) is invalid"),
+    ],
+)
 def test_train_settings(capsys, tmp_path, setting, needle):
-    one_line_error(capsys, ["train", "iql", "a1-walk-v0", "--offline-steps", "10", "--set", setting,
-                            "--run-dir", str(tmp_path / "run")], needle)
+    one_line_error(
+        capsys,
+        ["train", "iql", "a1-walk-v0", "--offline-steps", "10", "--set", setting, "--run-dir", str(tmp_path / "run")],
+        needle,
+    )
     assert not (tmp_path / "run").exists() and not paths.home().exists()
 
 
-@pytest.mark.parametrize("argv, needle", [
-    (["--offline-steps", "-5"], "--offline-steps must be a non-negative integer"),
-    (["--online-steps", "-1"], "--online-steps must be a non-negative integer"),
-    (["--offline-steps", "0"], "nothing to train"),
-    (["--seed", "-3"], "--seed must be a non-negative integer"),
-    (["--offline-steps", "10", "--set", f"dataset_episodes={N + 1}"], f"ask for 1 to {N} episodes"),
-])
+@pytest.mark.parametrize(
+    "argv, needle",
+    [
+        (["--offline-steps", "-5"], "--offline-steps must be a non-negative integer"),
+        (["--online-steps", "-1"], "--online-steps must be a non-negative integer"),
+        (["--offline-steps", "0"], "nothing to train"),
+        (["--seed", "-3"], "--seed must be a non-negative integer"),
+        (["--offline-steps", "10", "--set", f"dataset_episodes={N + 1}"], f"ask for 1 to {N} episodes"),
+    ],
+)
 def test_train_arguments(capsys, tmp_path, argv, needle):
     one_line_error(capsys, ["train", "bc", "a1-walk-v0", *argv, "--run-dir", str(tmp_path / "run")], needle)
     assert not (tmp_path / "run").exists() and not paths.home().exists()
 
 
-@pytest.mark.parametrize("argv, needle", [
-    (["--seeds", "-1"], "--seeds: '-1' is not a seed"),
-    (["--seeds", "3-1"], "'3-1' is not a seed or an ascending range"),
-    (["--seeds", "a"], "'a' is not a seed"),
-    (["--offline-steps", "-1"], "--offline-steps must be a non-negative integer"),
-    (["--offline-steps", "0"], "nothing to train"),
-    (["--workers", "-2"], "--workers must be >= 0"),
-    (["--max-attempts", "0"], "--max-attempts must be >= 1"),
-    (["--cpus-per-cell", "0"], "--cpus-per-cell must be > 0"),
-    (["--nice", "-5"], "--nice must be from 0 to 19"),
-])
+@pytest.mark.parametrize(
+    "argv, needle",
+    [
+        (["--seeds", "-1"], "--seeds: '-1' is not a seed"),
+        (["--seeds", "3-1"], "'3-1' is not a seed or an ascending range"),
+        (["--seeds", "a"], "'a' is not a seed"),
+        (["--offline-steps", "-1"], "--offline-steps must be a non-negative integer"),
+        (["--offline-steps", "0"], "nothing to train"),
+        (["--workers", "-2"], "--workers must be >= 0"),
+        (["--max-attempts", "0"], "--max-attempts must be >= 1"),
+        (["--cpus-per-cell", "0"], "--cpus-per-cell must be > 0"),
+        (["--nice", "-5"], "--nice must be from 0 to 19"),
+    ],
+)
 def test_bench_arguments(capsys, tmp_path, argv, needle):
-    one_line_error(capsys, ["bench", "--tasks", "a1-walk-v0", "--algos", "bc", "--out", str(tmp_path / "grid"),
-                            *argv], needle)
+    one_line_error(
+        capsys, ["bench", "--tasks", "a1-walk-v0", "--algos", "bc", "--out", str(tmp_path / "grid"), *argv], needle
+    )
     assert not (tmp_path / "grid").exists() and not paths.home().exists()
 
 
-@pytest.mark.parametrize("argv, needle", [(["--reps", "0"], "--reps must be an integer >= 1, got 0"),
-                                          (["--seed", "-2"], "--seed must be an integer >= 0, got -2")])
+@pytest.mark.parametrize(
+    "argv, needle",
+    [
+        (["--reps", "0"], "--reps must be an integer >= 1, got 0"),
+        (["--seed", "-2"], "--seed must be an integer >= 0, got -2"),
+    ],
+)
 def test_report_arguments(capsys, tmp_path, argv, needle):
     one_line_error(capsys, ["report", str(tmp_path), "--out", str(tmp_path / "report"), *argv], needle)
     assert not (tmp_path / "report").exists()
@@ -155,23 +178,49 @@ def test_eval_on_a_task_with_other_spaces(capsys, tmp_path):
     from d5rl.training.loop import train
 
     run = tmp_path / "run"
-    train("bc", "toy-reach-v0", 8, 0, 0, ["hidden_dims=8", "batch_size=8", "eval_episodes=1", "eval_envs=1",
-                                          "progress=false", "tensorboard=false", "checkpoint_interval=8"],
-          run, dataset=toy_dataset(4))
-    one_line_error(capsys, ["eval", str(run), "--task", "toy-reach-pixels-v0"],
-                   "trained on toy-reach-v0, whose observation space", "`d5rl info TASK`")
+    train(
+        "bc",
+        "toy-reach-v0",
+        8,
+        0,
+        0,
+        [
+            "hidden_dims=8",
+            "batch_size=8",
+            "eval_episodes=1",
+            "eval_envs=1",
+            "progress=false",
+            "tensorboard=false",
+            "checkpoint_interval=8",
+        ],
+        run,
+        dataset=toy_dataset(4),
+    )
+    one_line_error(
+        capsys,
+        ["eval", str(run), "--task", "toy-reach-pixels-v0"],
+        "trained on toy-reach-v0, whose observation space",
+        "`d5rl info TASK`",
+    )
     one_line_error(capsys, ["eval", str(run), "--task", "toy-reach-v1"], "'toy-reach-v1'")
     one_line_error(capsys, ["eval", str(run), "--seed", "-1"], "seed must be a non-negative integer, got -1")
-    one_line_error(capsys, ["eval", str(run), "--video", str(tmp_path / "v.txt")],
-                   ".txt is not one of .mp4", f"pass e.g. {tmp_path / 'v.mp4'}")
+    one_line_error(
+        capsys,
+        ["eval", str(run), "--video", str(tmp_path / "v.txt")],
+        ".txt is not one of .mp4",
+        f"pass e.g. {tmp_path / 'v.mp4'}",
+    )
     (tmp_path / "file").touch()
     one_line_error(capsys, ["eval", str(run), "--video", str(tmp_path / "file" / "v.mp4")], "cannot write a video to")
     assert not list(tmp_path.glob("v.*"))
 
 
 def test_render_refuses_a_video_it_cannot_write_before_rendering(capsys, tmp_path):
-    one_line_error(capsys, ["render", "toy-reach-v0", "--steps", "3", "--out", str(tmp_path / "x.webm")],
-                   ".webm is not one of .mp4, .mkv, .mov, .avi, .gif")
+    one_line_error(
+        capsys,
+        ["render", "toy-reach-v0", "--steps", "3", "--out", str(tmp_path / "x.webm")],
+        ".webm is not one of .mp4, .mkv, .mov, .avi, .gif",
+    )
     assert main(["render", "toy-reach-v0", "--steps", "3", "--out", str(tmp_path / "new" / "x.gif")]) == 0
     assert (tmp_path / "new" / "x.gif").stat().st_size > 0
 
@@ -181,8 +230,12 @@ def test_calibrate_episodes(capsys):
 
 
 def test_render_names_the_episodes_there_are(capsys, tmp_path):
-    one_line_error(capsys, ["render", "a1-walk-v0", "--episode", "99999", "--out", str(tmp_path / "x.mp4")],
-                   "no episode 99999", f"numbered 0 to {N - 1}")
+    one_line_error(
+        capsys,
+        ["render", "a1-walk-v0", "--episode", "99999", "--out", str(tmp_path / "x.mp4")],
+        "no episode 99999",
+        f"numbered 0 to {N - 1}",
+    )
     assert not paths.home().exists() and not (tmp_path / "x.mp4").exists()
 
 
@@ -199,19 +252,22 @@ def test_evaluate_refuses_zero_episodes():
         evaluate(None, "toy-reach-v0", 0)
 
 
-@pytest.mark.parametrize("damage, needle", [
-    ("short_actions", "actions has 8 rows, observations have 9"),
-    ("no_actions", "has no 'actions' array"),
-    ("nan", "observations has 1 NaN or infinite values (first in row 2)"),
-    ("short_terminals", "terminals has 5 rows"),
-    ("string_obs", "observations holds |S3 values, not numbers"),
-    ("terminals_2d", "terminals has shape (9, 2), expected 1 dimension(s)"),
-    ("all_terminal", "no episode has 2 or more rows"),
-    ("huge_values", "observations has values beyond ±1000 (first in row 4: 1e+30)"),
-    ("complex_actions", "actions holds complex64 values, not numbers"),
-    ("declared_huge", "observations declares shape (30000000, 60) (6,866 MiB) in a file of"),
-    ("not_hdf5", "is not an HDF5 file"),
-])
+@pytest.mark.parametrize(
+    "damage, needle",
+    [
+        ("short_actions", "actions has 8 rows, observations have 9"),
+        ("no_actions", "has no 'actions' array"),
+        ("nan", "observations has 1 NaN or infinite values (first in row 2)"),
+        ("short_terminals", "terminals has 5 rows"),
+        ("string_obs", "observations holds |S3 values, not numbers"),
+        ("terminals_2d", "terminals has shape (9, 2), expected 1 dimension(s)"),
+        ("all_terminal", "no episode has 2 or more rows"),
+        ("huge_values", "observations has values beyond ±1000 (first in row 4: 1e+30)"),
+        ("complex_actions", "actions holds complex64 values, not numbers"),
+        ("declared_huge", "observations declares shape (30000000, 60) (6,866 MiB) in a file of"),
+        ("not_hdf5", "is not an HDF5 file"),
+    ],
+)
 def test_import_kitchen_human_refuses_a_broken_d4rl_file(capsys, tmp_path, damage, needle):
     h5py = pytest.importorskip("h5py")
     n = 9
@@ -256,19 +312,39 @@ def test_a_bad_mujoco_gl_does_not_break_list_and_rendering_says_why(tmp_path, va
     import sys
 
     env = {**os.environ, "MUJOCO_GL": value, "D5RL_HOME": str(tmp_path)}
-    listed = subprocess.run([sys.executable, "-m", "d5rl.cli", "list"], env=env, capture_output=True, text=True,
-                            timeout=120)
+    listed = subprocess.run(
+        [sys.executable, "-m", "d5rl.cli", "list"], env=env, capture_output=True, text=True, timeout=120
+    )
     assert listed.returncode == 0 and "a1-walk-v0" in listed.stdout, listed.stderr[-2000:]
-    render = subprocess.run([sys.executable, "-c", "import d5rl\nenv = d5rl.make_env('toy-reach-pixels-v0')\n"
-                             "from d5rl.rendering import make_renderer\n"
-                             "import mujoco\nmake_renderer(mujoco.MjModel.from_xml_string('<mujoco/>'), 8, 8)"],
-                            env=env, capture_output=True, text=True, timeout=120)
+    render = subprocess.run(
+        [
+            sys.executable,
+            "-c",
+            "import d5rl\nenv = d5rl.make_env('toy-reach-pixels-v0')\n"
+            "from d5rl.rendering import make_renderer\n"
+            "import mujoco\nmake_renderer(mujoco.MjModel.from_xml_string('<mujoco/>'), 8, 8)",
+        ],
+        env=env,
+        capture_output=True,
+        text=True,
+        timeout=120,
+    )
     assert render.returncode != 0 and needle in render.stderr.splitlines()[-1], render.stderr[-2000:]
     # a worker process inherits MUJOCO_GL=disable and the reason with it
     child = "import d5rl.envs; print(d5rl.envs.GL_PROBLEM)"
-    worker = subprocess.run([sys.executable, "-c", "import subprocess, sys\nimport d5rl.envs\n"
-                             f"print(subprocess.run([sys.executable, '-c', {child!r}], capture_output=True, "
-                             "text=True).stdout)"], env=env, capture_output=True, text=True, timeout=120)
+    worker = subprocess.run(
+        [
+            sys.executable,
+            "-c",
+            "import subprocess, sys\nimport d5rl.envs\n"
+            f"print(subprocess.run([sys.executable, '-c', {child!r}], capture_output=True, "
+            "text=True).stdout)",
+        ],
+        env=env,
+        capture_output=True,
+        text=True,
+        timeout=120,
+    )
     assert needle in worker.stdout, worker.stderr[-2000:]
 
 

@@ -97,10 +97,12 @@ def test_render_replays_every_stored_state_of_the_episode(tmp_path, capsys):
 
 
 def test_render_and_browse_bad_input_is_one_line(capsys, tmp_path):
-    for argv, says in ((["render", "toy-reach-v0", "--size", "big"], "WIDTHxHEIGHT"),
-                       (["render", "toy-reach-v0", "--steps", "0"], "--steps must be at least 1"),
-                       (["render", "toy-reach-v0", "--episode", "-1"], "--episode must be >= 0"),
-                       (["browse", str(tmp_path / "missing-run")], "does not exist")):
+    for argv, says in (
+        (["render", "toy-reach-v0", "--size", "big"], "WIDTHxHEIGHT"),
+        (["render", "toy-reach-v0", "--steps", "0"], "--steps must be at least 1"),
+        (["render", "toy-reach-v0", "--episode", "-1"], "--episode must be >= 0"),
+        (["browse", str(tmp_path / "missing-run")], "does not exist"),
+    ):
         try:
             code = main(argv)
         except SystemExit as e:  # argparse's own errors

@@ -5,7 +5,6 @@ block is one that parses (``d5rl`` commands through d5rl's own argument parser, 
 and every ``python`` block of the docs pages runs.  The README is a front page: short, and its links reach
 every docs page."""
 
-import os
 import re
 import shlex
 from pathlib import Path
@@ -132,8 +131,12 @@ def command_problem(cmd: list[str]) -> str | None:
 
 @pytest.mark.parametrize("doc", DOCS, ids=lambda p: str(p.relative_to(ROOT)))
 def test_documented_commands_parse(doc):
-    bad = [f"`{shlex.join(c)}`: {why}" for block in blocks(doc, "bash") for c in commands(block)
-           if (why := command_problem(c))]
+    bad = [
+        f"`{shlex.join(c)}`: {why}"
+        for block in blocks(doc, "bash")
+        for c in commands(block)
+        if (why := command_problem(c))
+    ]
     spans = re.findall(r"`((?:d5rl|python|bash) [^`\n]+)`", prose(doc))
     for span in spans:  # inline commands often hold placeholders (TASK, RUN_DIR): the command and file must exist
         words = span.split()
@@ -150,8 +153,11 @@ def test_documented_commands_parse(doc):
 
 def test_command_checks_can_fail():
     block = 'S="--seeds 0-2"\nd5rl bench --tasks a1 \\\n  $S  # c\nX=1 bash scripts/test.sh && d5rl list &'
-    assert commands(block) == [["d5rl", "bench", "--tasks", "a1", "--seeds", "0-2"], ["bash", "scripts/test.sh"],
-                               ["d5rl", "list"]]
+    assert commands(block) == [
+        ["d5rl", "bench", "--tasks", "a1", "--seeds", "0-2"],
+        ["bash", "scripts/test.sh"],
+        ["d5rl", "list"],
+    ]
     assert command_problem(["d5rl", "train", "a1-walk-v0", "--algo", "iql"])  # not how train is called
     assert command_problem(["d5rl", "bench", "--no-such-flag"])
     assert command_problem(["python", "bench/no_such_script.py"]) == "no file bench/no_such_script.py"

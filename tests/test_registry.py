@@ -6,11 +6,14 @@ from d5rl.errors import D5RLError, TaskIdError, UnknownTaskError
 from d5rl.registry import TaskId, parse_task_id
 
 
-@pytest.mark.parametrize("tid,want", [
-    ("a1-walk-v0", TaskId("a1", "walk", 0)),
-    ("kitchen-standard-mixed-v0", TaskId("kitchen", "standard-mixed", 0)),
-    ("wx-sorting-pickplacedata-v12", TaskId("wx", "sorting-pickplacedata", 12)),
-])
+@pytest.mark.parametrize(
+    "tid,want",
+    [
+        ("a1-walk-v0", TaskId("a1", "walk", 0)),
+        ("kitchen-standard-mixed-v0", TaskId("kitchen", "standard-mixed", 0)),
+        ("wx-sorting-pickplacedata-v12", TaskId("wx", "sorting-pickplacedata", 12)),
+    ],
+)
 def test_parse_task_id(tid, want):
     assert parse_task_id(tid) == want and str(want) == tid
 

@@ -7,13 +7,13 @@ import pytest
 
 pytest.importorskip("jax")
 
-import d5rl  # noqa: E402
-from d5rl.agents import AGENTS, get_agent  # noqa: E402
-from d5rl.cli import main  # noqa: E402
-from d5rl.runner import jobs  # noqa: E402
-from d5rl.runner.grid import expand_grid, parse_assignments  # noqa: E402
-from d5rl.settings import resolve, run_steps, table  # noqa: E402
-from d5rl.training.config import get_train_config  # noqa: E402
+import d5rl
+from d5rl.agents import AGENTS, get_agent
+from d5rl.cli import main
+from d5rl.runner import jobs
+from d5rl.runner.grid import expand_grid, parse_assignments
+from d5rl.settings import resolve, run_steps, table
+from d5rl.training.config import get_train_config
 
 TASKS = [t for t in d5rl.list_tasks() if not t.startswith("test-")]
 
@@ -25,8 +25,9 @@ def _plain(d):
 def test_every_setting_is_a_key_of_its_agent_or_the_loop():
     data = table()
     sections = [("observations", obs, sec) for obs, sec in _plain(data["observations"]).items()]
-    sections += [(group, obs, sec) for group, by_obs in _plain(data["groups"]).items()
-                 for obs, sec in _plain(by_obs).items()]
+    sections += [
+        (group, obs, sec) for group, by_obs in _plain(data["groups"]).items() for obs, sec in _plain(by_obs).items()
+    ]
     for where, obs, section in sections:
         assert obs in ("state", "pixels"), (where, obs)
         for algo, values in _plain(section).items():
@@ -49,18 +50,27 @@ def test_every_setting_is_a_key_of_its_agent_or_the_loop():
 
 # How a source starts: the D5RL paper's appendix C, a file of the authors' release, another paper, a pointer
 # to the entry whose values it repeats, or d5rl's own reason.
-CITATION = re.compile(r"^(paper App\. C, \S|release (examples|jaxrl2)/\S+\.(py|sh)|(IQL|TD3\+BC|RLPD) paper \("
-                      r"|as \S|d5rl( takes|:) \S)")
+CITATION = re.compile(
+    r"^(paper App\. C, \S|release (examples|jaxrl2)/\S+\.(py|sh)|(IQL|TD3\+BC|RLPD) paper \("
+    r"|as \S|d5rl( takes|:) \S)"
+)
 
 
 def test_every_entry_cites_a_checkable_source():
     """Every entry that sets values says where each comes from, precisely enough to check: a paper section or
     table, or a release file and key ("; " separates citations; docs/agents.md sets them side by side)."""
     data = table()
-    entries = [(f"{group}/{obs}/{algo}", values) for group, by_obs in _plain(data["groups"]).items()
-               for obs, sec in _plain(by_obs).items() for algo, values in _plain(sec).items()]
-    entries += [(f"observations/{obs}/{algo}", values) for obs, sec in _plain(data["observations"]).items()
-                for algo, values in _plain(sec).items()]
+    entries = [
+        (f"{group}/{obs}/{algo}", values)
+        for group, by_obs in _plain(data["groups"]).items()
+        for obs, sec in _plain(by_obs).items()
+        for algo, values in _plain(sec).items()
+    ]
+    entries += [
+        (f"observations/{obs}/{algo}", values)
+        for obs, sec in _plain(data["observations"]).items()
+        for algo, values in _plain(sec).items()
+    ]
     entries += [(f"protocol/{group}", values) for group, values in _plain(data["protocol"]).items()]
     assert len(entries) > 40
     for where, values in entries:
@@ -69,8 +79,14 @@ def test_every_entry_cites_a_checkable_source():
         for part in source.split("; "):
             assert CITATION.match(part), f"{where}: {part!r} names no paper section, release file or reason"
     text = json.dumps(data)
-    for claim in ("release IQL config", "release config", "release expectile 0.7", "0.7 is its config default",
-                  "swept 0.05-10", "release CQL config default"):  # claims an outside review found false
+    for claim in (
+        "release IQL config",
+        "release config",
+        "release expectile 0.7",
+        "0.7 is its config default",
+        "swept 0.05-10",
+        "release CQL config default",
+    ):  # claims an outside review found false
         assert claim not in text, claim
 
 
@@ -96,7 +112,12 @@ def test_train_bench_and_show_config_agree_for_every_task_and_algorithm(capsys, 
 def test_what_the_settings_say():
     pix = resolve("iql", "kitchen-standard-mixed-v0")
     state = resolve("iql", "kitchen-standard-mixed-state-v0")
-    assert (pix.agent.batch_size, pix.agent.actor_lr, pix.agent.temperature, pix.train.frame_stack) == (64, 1e-4, 3.0, 3)
+    assert (pix.agent.batch_size, pix.agent.actor_lr, pix.agent.temperature, pix.train.frame_stack) == (
+        64,
+        1e-4,
+        3.0,
+        3,
+    )
     assert pix.agent.expectile == 0.5  # the release's kitchen IQL config
     wx = resolve("iql", "wx-sorting-v0")
     assert (wx.agent.expectile, wx.agent.temperature, wx.train.frame_stack) == (0.9, 10.0, 1)  # release WidowX
@@ -132,15 +153,16 @@ def test_rlpd_takes_no_offline_steps_before_fine_tuning(capsys):
     assert (iql.offline_steps, iql.online_steps) == (500_000, 500_000)
     [offline_only] = expand_grid(["a1-walk-v0"], ["rlpd"], [0], 10_000, 0)
     assert offline_only.offline_steps == 10_000  # Table 1 runs RLPD on the data alone
-    assert main(["train", "rlpd", "a1-walk-v0", "--offline-steps", "1000", "--online-steps", "50",
-                 "--show-config"]) == 0
+    assert (
+        main(["train", "rlpd", "a1-walk-v0", "--offline-steps", "1000", "--online-steps", "50", "--show-config"]) == 0
+    )
     out = capsys.readouterr()
     assert json.loads(out.out)["offline_steps"] == 0 and "no offline phase" in out.err
 
 
 def test_a_run_records_the_resolved_config_that_eval_reads(tmp_path):
-    from d5rl.training.loop import load_run, train
     from d5rl.envs.toy.data import toy_dataset
+    from d5rl.training.loop import load_run, train
 
     over = ["hidden_dims=16,16", "eval_episodes=1", "eval_envs=1", "progress=false", "tensorboard=false"]
     train("iql", "toy-reach-v0", 16, 0, 0, over, tmp_path / "run", dataset=toy_dataset(4))

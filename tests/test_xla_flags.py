@@ -42,21 +42,35 @@ print(*sorted({op for b in bodies for op in ("convolution", "dot") if " " + op +
 """
 
 
-@pytest.mark.skipif(xla_flags.jaxlib_version() not in xla_flags.CONV_ON_EIGEN_JAXLIB, reason="flag not set for this jaxlib")
+@pytest.mark.skipif(
+    xla_flags.jaxlib_version() not in xla_flags.CONV_ON_EIGEN_JAXLIB, reason="flag not set for this jaxlib"
+)
 def test_convolutions_leave_ynnpack_in_a_fresh_process():
-    out = subprocess.run([sys.executable, "-c", CHECK], capture_output=True, text=True, timeout=120,
-                             env={k: v for k, v in os.environ.items() if k != "XLA_FLAGS"})
+    out = subprocess.run(
+        [sys.executable, "-c", CHECK],
+        capture_output=True,
+        text=True,
+        timeout=120,
+        env={k: v for k, v in os.environ.items() if k != "XLA_FLAGS"},
+    )
     assert out.returncode == 0, out.stderr[-2000:]
     assert out.stdout.split() == ["dot"]  # dot products stay on YNNPACK, convolutions do not
 
 
 def test_import_d5rl_sets_no_xla_flags_and_registers_gymnasium_ids():
-    code = ("import os, gymnasium, d5rl; assert 'XLA_FLAGS' not in os.environ, os.environ['XLA_FLAGS']; "
-            "env = gymnasium.make('d5rl/a1-walk-v0'); print(env.spec.id, os.environ['MUJOCO_GL'])")
+    code = (
+        "import os, gymnasium, d5rl; assert 'XLA_FLAGS' not in os.environ, os.environ['XLA_FLAGS']; "
+        "env = gymnasium.make('d5rl/a1-walk-v0'); print(env.spec.id, os.environ['MUJOCO_GL'])"
+    )
     env = {k: v for k, v in os.environ.items() if k not in ("XLA_FLAGS", "MUJOCO_GL")}
     out = subprocess.run([sys.executable, "-c", code], capture_output=True, text=True, timeout=120, env=env)
     assert out.returncode == 0, out.stderr[-2000:]
     assert out.stdout.split() == ["d5rl/a1-walk-v0", "egl"]
-    out = subprocess.run([sys.executable, "-c", "import os, d5rl, d5rl.envs.a1.task; print(os.environ['MUJOCO_GL'])"],
-                         capture_output=True, text=True, timeout=120, env={**env, "MUJOCO_GL": "osmesa"})
+    out = subprocess.run(
+        [sys.executable, "-c", "import os, d5rl, d5rl.envs.a1.task; print(os.environ['MUJOCO_GL'])"],
+        capture_output=True,
+        text=True,
+        timeout=120,
+        env={**env, "MUJOCO_GL": "osmesa"},
+    )
     assert out.stdout.strip() == "osmesa"  # the user's choice stands

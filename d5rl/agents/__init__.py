@@ -55,6 +55,7 @@ def get_agent(name: str):
     except ImportError as e:  # jax/flax/optax missing
         from d5rl.errors import MissingDependencyError
 
-        raise MissingDependencyError(f"agent {key} needs JAX, Flax and Optax ({e})",
-                                     "install the training extra: pip install 'd5rl[train]'") from e
+        raise MissingDependencyError(
+            f"agent {key} needs JAX, Flax and Optax ({e})", "install the training extra: pip install 'd5rl[train]'"
+        ) from e
     return getattr(module, AGENTS[key][1]), module.get_config

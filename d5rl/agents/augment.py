@@ -50,8 +50,9 @@ def jitter_params(key, batch: int, brightness=0.2, contrast=0.2, saturation=0.2,
 
     cos, sin = jnp.cos(theta), jnp.sin(theta)
     zero, one = jnp.zeros_like(cos), jnp.ones_like(cos)
-    rot = jnp.stack([jnp.stack([one, zero, zero], -1), jnp.stack([zero, cos, -sin], -1),
-                     jnp.stack([zero, sin, cos], -1)], -2)  # (b, 3, 3)
+    rot = jnp.stack(
+        [jnp.stack([one, zero, zero], -1), jnp.stack([zero, cos, -sin], -1), jnp.stack([zero, sin, cos], -1)], -2
+    )  # (b, 3, 3)
     hue_m = jnp.einsum("ij,bjk,kl->bil", _YIQ_TO_RGB, rot, _RGB_TO_YIQ)
     sat_m = fs[:, None, None] * jnp.eye(3) + (1 - fs)[:, None, None] * _LUMA[None, None, :]
     a = jnp.where(apply[:, None, None], (fc * fb)[:, None, None] * (hue_m @ sat_m), jnp.eye(3))
@@ -117,12 +118,13 @@ def augment_observations(key, obs, shift_pad: int = 4, jitter: bool = True):
             maps.append(a)
             offs.append(off)
     if jittered:
-        x = apply_jitter(jnp.concatenate([out[k] for k in jittered], -1),
-                         jnp.concatenate(maps, 1), jnp.concatenate(offs, 1))
+        x = apply_jitter(
+            jnp.concatenate([out[k] for k in jittered], -1), jnp.concatenate(maps, 1), jnp.concatenate(offs, 1)
+        )
         start = 0
         for k in jittered:
             c = out[k].shape[-1]
-            out[k] = x[..., start:start + c]
+            out[k] = x[..., start : start + c]
             start += c
     return out
 
@@ -133,6 +135,8 @@ def augment_batch(key, batch, config):
         return batch
     k1, k2 = jax.random.split(key)
     pad, jitter = int(config.shift_pad), bool(config.color_jitter)
-    return {**batch,
-            "observations": augment_observations(k1, batch["observations"], pad, jitter),
-            "next_observations": augment_observations(k2, batch["next_observations"], pad, jitter)}
+    return {
+        **batch,
+        "observations": augment_observations(k1, batch["observations"], pad, jitter),
+        "next_observations": augment_observations(k2, batch["next_observations"], pad, jitter),
+    }

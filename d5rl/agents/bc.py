@@ -18,8 +18,15 @@ import jax
 import optax
 
 from d5rl.agents.augment import augment_batch
-from d5rl.agents.common import (ENCODER_DEFAULTS, Agent, make_train_state, nonpytree_field, obs_ndims, prepare_example,
-                                release_actor_decay)
+from d5rl.agents.common import (
+    ENCODER_DEFAULTS,
+    Agent,
+    make_train_state,
+    nonpytree_field,
+    obs_ndims,
+    prepare_example,
+    release_actor_decay,
+)
 from d5rl.agents.config import Config
 from d5rl.agents.encoders import make_encoder
 from d5rl.agents.networks import GaussianPolicy
@@ -35,8 +42,9 @@ class BCAgent(Agent):
     resolve_config = classmethod(release_actor_decay)  # actor_decay_steps=None: the release's decay horizon
 
     def actor_loss(self, actor_params, batch, key):
-        dist = self.actor.apply_fn({"params": actor_params}, self.normalize(batch["observations"]), train=True,
-                                   rngs={"dropout": key})
+        dist = self.actor.apply_fn(
+            {"params": actor_params}, self.normalize(batch["observations"]), train=True, rngs={"dropout": key}
+        )
         loss = -dist.log_prob(batch["actions"]).mean()
         mse = ((dist.mode() - batch["actions"]) ** 2).sum(-1).mean()
         return loss, {"actor/loss": loss, "actor/mse": mse, "actor/log_std": dist.log_std.mean()}
@@ -52,10 +60,17 @@ class BCAgent(Agent):
         config = get_config() if config is None else config
         ex_obs, ex_act = prepare_example(example_observations, example_actions)
         rng, k_actor = jax.random.split(jax.random.PRNGKey(seed))
-        actor_def = GaussianPolicy(make_encoder(config), config.hidden_dims, ex_act.shape[-1], tanh_squash=False,
-                                   log_std_min=config.log_std_min, log_std_max=config.log_std_max,
-                                   state_dependent_std=config.state_dependent_std, fixed_std=not config.learned_std,
-                                   dropout_rate=config.dropout_rate or None)
+        actor_def = GaussianPolicy(
+            make_encoder(config),
+            config.hidden_dims,
+            ex_act.shape[-1],
+            tanh_squash=False,
+            log_std_min=config.log_std_min,
+            log_std_max=config.log_std_max,
+            state_dependent_std=config.state_dependent_std,
+            fixed_std=not config.learned_std,
+            dropout_rate=config.dropout_rate or None,
+        )
         lr = config.actor_lr
         if config.actor_decay_steps:
             lr = optax.cosine_decay_schedule(config.actor_lr, config.actor_decay_steps)

@@ -178,7 +178,9 @@ class Agent(flax.struct.PyTreeNode):
 
     @jax.jit
     def _eval_rows(self, obs, keys):
-        one = lambda o, k: self._eval(jax.tree_util.tree_map(lambda x: x[None], o), k)[0]
+        def one(o, k):
+            return self._eval(jax.tree_util.tree_map(lambda x: x[None], o), k)[0]
+
         return jax.vmap(one)(obs, keys)
 
     @functools.partial(jax.jit, static_argnames=("temperature",))
@@ -229,12 +231,20 @@ def sac_train_states(config: Config, keys, ex_obs, ex_act, critic_dropout: float
     from d5rl.agents.networks import GaussianPolicy, Temperature
 
     k_actor, k_critic, k_temp = keys
-    actor_def = GaussianPolicy(make_encoder(config), config.hidden_dims, ex_act.shape[-1], tanh_squash=True,
-                               log_std_min=config.log_std_min, log_std_max=config.log_std_max)
+    actor_def = GaussianPolicy(
+        make_encoder(config),
+        config.hidden_dims,
+        ex_act.shape[-1],
+        tanh_squash=True,
+        log_std_min=config.log_std_min,
+        log_std_max=config.log_std_max,
+    )
     critic_def = sac_critic(config, critic_dropout)
-    return (make_train_state(actor_def, k_actor, (ex_obs,), config.actor_lr),
-            make_train_state(critic_def, k_critic, (ex_obs, ex_act), config.critic_lr),
-            make_train_state(Temperature(config.init_temperature), k_temp, (), config.temp_lr))
+    return (
+        make_train_state(actor_def, k_actor, (ex_obs,), config.actor_lr),
+        make_train_state(critic_def, k_critic, (ex_obs, ex_act), config.critic_lr),
+        make_train_state(Temperature(config.init_temperature), k_temp, (), config.temp_lr),
+    )
 
 
 def sac_critic(config: Config, critic_dropout: float | None = None, num_qs: int | None = None):
@@ -242,8 +252,13 @@ def sac_critic(config: Config, critic_dropout: float | None = None, num_qs: int 
     from d5rl.agents.encoders import make_encoder
     from d5rl.agents.networks import Critic
 
-    return Critic(make_encoder(config), config.hidden_dims, config.num_qs if num_qs is None else num_qs,
-                  config.critic_layer_norm, critic_dropout)
+    return Critic(
+        make_encoder(config),
+        config.hidden_dims,
+        config.num_qs if num_qs is None else num_qs,
+        config.critic_layer_norm,
+        critic_dropout,
+    )
 
 
 def split_utd(batch, utd: int):

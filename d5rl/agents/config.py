@@ -12,7 +12,8 @@ from __future__ import annotations
 import dataclasses
 import json
 import math
-from typing import Any, Iterable, Iterator, Mapping
+from collections.abc import Iterable, Iterator, Mapping
+from typing import Any
 
 from d5rl.errors import D5RLError
 
@@ -107,24 +108,25 @@ class Config(Mapping):
     def __repr__(self) -> str:
         return f"Config({self._data!r})"
 
-    def replace(self, **kwargs: Any) -> "Config":
+    def replace(self, **kwargs: Any) -> Config:
         """A copy with some keys changed; unknown keys raise :class:`ConfigError`."""
         unknown = [k for k in kwargs if k not in self._data]
         if unknown:
             raise ConfigError(f"unknown config keys {unknown}", f"known keys: {sorted(self._data)}")
         return Config({**self._data, **kwargs})
 
-    def override(self, assignments: Iterable[str] | Mapping[str, Any] | None) -> "Config":
+    def override(self, assignments: Iterable[str] | Mapping[str, Any] | None) -> Config:
         """Apply ``["key=value", ...]`` (strings parsed by type) or a mapping of values."""
         if not assignments:
             return self
         if isinstance(assignments, Mapping):  # text values are parsed like "key=value" strings
-            assignments = [f"{k}={v}" for k, v in assignments.items() if isinstance(v, str)] + \
-                [(k, v) for k, v in assignments.items() if not isinstance(v, str)]
+            assignments = [f"{k}={v}" for k, v in assignments.items() if isinstance(v, str)] + [
+                (k, v) for k, v in assignments.items() if not isinstance(v, str)
+            ]
             return self._apply(assignments)
         return self._apply(assignments)
 
-    def _apply(self, assignments) -> "Config":
+    def _apply(self, assignments) -> Config:
         updates = {}
         for item in assignments:
             if isinstance(item, tuple):  # (key, value) already typed
@@ -167,38 +169,59 @@ class Bound:
     each: bool = False  # a tuple of such values (e.g. hidden layer widths), at least one
 
     def describe(self) -> str:
-        bounds = " and ".join(f"{op} {v:g}" for op, v in ((">=", self.ge), (">", self.gt), ("<=", self.le),
-                                                          ("<", self.lt)) if v is not None)
+        bounds = " and ".join(
+            f"{op} {v:g}"
+            for op, v in ((">=", self.ge), (">", self.gt), ("<=", self.le), ("<", self.lt))
+            if v is not None
+        )
         text = ("an integer" if self.kind is int else "a number") + (f" {bounds}" if bounds else "")
-        text = f"a list of {text.replace('an integer', 'integers').replace('a number', 'numbers')}" if self.each else text
+        text = (
+            f"a list of {text.replace('an integer', 'integers').replace('a number', 'numbers')}" if self.each else text
+        )
         return text + (" or none" if self.optional else "")
 
     def accepts(self, v: Any) -> bool:
         if v is None:
             return self.optional
         if self.each:
-            return isinstance(v, tuple) and len(v) > 0 and all(dataclasses.replace(self, each=False).accepts(x)
-                                                                for x in v)
+            return (
+                isinstance(v, tuple) and len(v) > 0 and all(dataclasses.replace(self, each=False).accepts(x) for x in v)
+            )
         if isinstance(v, bool) or not isinstance(v, (int, float)) or (self.kind is int and not isinstance(v, int)):
             return False
         if not math.isfinite(v):
             return False
-        return ((self.ge is None or v >= self.ge) and (self.gt is None or v > self.gt)
-                and (self.le is None or v <= self.le) and (self.lt is None or v < self.lt))
+        return (
+            (self.ge is None or v >= self.ge)
+            and (self.gt is None or v > self.gt)
+            and (self.le is None or v <= self.le)
+            and (self.lt is None or v < self.lt)
+        )
 
 
 # Keys that mean the same in every agent's config, checked wherever they appear.
 AGENT_BOUNDS = {
     "batch_size": Bound(int, ge=1),
-    "actor_lr": Bound(float, gt=0), "critic_lr": Bound(float, gt=0), "value_lr": Bound(float, gt=0),
+    "actor_lr": Bound(float, gt=0),
+    "critic_lr": Bound(float, gt=0),
+    "value_lr": Bound(float, gt=0),
     "temp_lr": Bound(float, gt=0),
-    "hidden_dims": Bound(int, ge=1, each=True), "critic_hidden_dims": Bound(int, ge=1, each=True),
-    "discount": Bound(float, gt=0, le=1), "tau": Bound(float, ge=0, le=1),
-    "num_qs": Bound(int, ge=1), "num_min_qs": Bound(int, ge=1), "utd_ratio": Bound(int, ge=1),
-    "expectile": Bound(float, gt=0, lt=1), "offline_ratio": Bound(float, ge=0, le=1),
-    "start_steps": Bound(int, ge=0), "actor_decay_steps": Bound(int, ge=0, optional=True),
-    "diffusion_steps": Bound(int, ge=1), "num_samples": Bound(int, ge=1), "cql_n_actions": Bound(int, ge=1),
-    "policy_freq": Bound(int, ge=1), "dropout_rate": Bound(float, ge=0, lt=1),
+    "hidden_dims": Bound(int, ge=1, each=True),
+    "critic_hidden_dims": Bound(int, ge=1, each=True),
+    "discount": Bound(float, gt=0, le=1),
+    "tau": Bound(float, ge=0, le=1),
+    "num_qs": Bound(int, ge=1),
+    "num_min_qs": Bound(int, ge=1),
+    "utd_ratio": Bound(int, ge=1),
+    "expectile": Bound(float, gt=0, lt=1),
+    "offline_ratio": Bound(float, ge=0, le=1),
+    "start_steps": Bound(int, ge=0),
+    "actor_decay_steps": Bound(int, ge=0, optional=True),
+    "diffusion_steps": Bound(int, ge=1),
+    "num_samples": Bound(int, ge=1),
+    "cql_n_actions": Bound(int, ge=1),
+    "policy_freq": Bound(int, ge=1),
+    "dropout_rate": Bound(float, ge=0, lt=1),
     "actor_steps": Bound(int, ge=1),
 }
 
@@ -207,6 +230,8 @@ def check_bounds(cfg: Config, bounds: Mapping[str, Bound]) -> Config:
     """Raise a one-line :class:`ConfigError` for the first value outside its bounds; return ``cfg``."""
     for key, bound in bounds.items():
         if key in cfg and not bound.accepts(cfg[key]):
-            raise ConfigError(f"config value {key}={cfg[key]!r} is invalid: it must be {bound.describe()}",
-                              f"pass e.g. --set {key}=... with {bound.describe()}")
+            raise ConfigError(
+                f"config value {key}={cfg[key]!r} is invalid: it must be {bound.describe()}",
+                f"pass e.g. --set {key}=... with {bound.describe()}",
+            )
     return cfg

@@ -22,8 +22,15 @@ import jax
 import jax.numpy as jnp
 
 from d5rl.agents.augment import augment_batch
-from d5rl.agents.common import (ENCODER_DEFAULTS, Agent, copy_tree, nonpytree_field, obs_ndims, prepare_example,
-                                sac_train_states)
+from d5rl.agents.common import (
+    ENCODER_DEFAULTS,
+    Agent,
+    copy_tree,
+    nonpytree_field,
+    obs_ndims,
+    prepare_example,
+    sac_train_states,
+)
 from d5rl.agents.config import Config
 from d5rl.agents.networks import soft_update
 
@@ -60,15 +67,21 @@ class CQLAgent(Agent):
         temperature = self.temp.apply_fn({"params": self.temp.params})
         if cfg.cql_max_target_backup:  # n actions from π(s'), the best one's value (release: max_q_backup)
             next_a, next_logp = dist_next.sample_n_and_log_prob(k_next, n)
-            next_q = self._policy_q(self.target_critic_params, self.critic.apply_fn(
-                {"params": self.target_critic_params}, batch["next_observations"], method="encode"), next_a).min(0)
+            next_q = self._policy_q(
+                self.target_critic_params,
+                self.critic.apply_fn(
+                    {"params": self.target_critic_params}, batch["next_observations"], method="encode"
+                ),
+                next_a,
+            ).min(0)
             best = jnp.argmax(next_q, axis=0)
             target_q = jnp.take_along_axis(next_q, best[None], 0)[0]
             next_logp = jnp.take_along_axis(next_logp, best[None], 0)[0]
         else:
             next_a, next_logp = dist_next.sample_and_log_prob(k_next)
-            target_q = self.critic.apply_fn({"params": self.target_critic_params}, batch["next_observations"],
-                                            next_a).min(0)
+            target_q = self.critic.apply_fn(
+                {"params": self.target_critic_params}, batch["next_observations"], next_a
+            ).min(0)
         if cfg.backup_entropy:
             target_q = target_q - temperature * next_logp
         target = jax.lax.stop_gradient(batch["rewards"] + cfg.discount * batch["masks"] * target_q)
@@ -83,8 +96,9 @@ class CQLAgent(Agent):
         if cfg.cql_next_actions:  # the CQL paper's third set: actions of π(s') valued at s
             nxt_a, nxt_logp = jax.lax.stop_gradient(dist_next.sample_n_and_log_prob(k_nxt, n))
             q_nxt, _ = self.bound_policy_q(self._policy_q(critic_params, features, nxt_a), batch)
-            policy_parts = [q_nxt - nxt_logp[None], q_cur - cur_logp[None]] if cfg.cql_importance_sample \
-                else [q_nxt, q_cur]
+            policy_parts = (
+                [q_nxt - nxt_logp[None], q_cur - cur_logp[None]] if cfg.cql_importance_sample else [q_nxt, q_cur]
+            )
         else:
             policy_parts = [q_cur - cur_logp[None]] if cfg.cql_importance_sample else [q_cur]
         if cfg.cql_importance_sample:
@@ -95,9 +109,15 @@ class CQLAgent(Agent):
         cql_diff = jnp.clip(ood - qs, cfg.cql_clip_diff_min, cfg.cql_clip_diff_max).mean(axis=1)
         cql_loss = cfg.cql_alpha * cql_diff.sum()
         loss = td_loss + cql_loss
-        return loss, {"critic/loss": loss, "critic/td_loss": td_loss, "critic/cql_loss": cql_loss,
-                      "critic/q": qs.mean(), "critic/target_q": target.mean(), "critic/ood_q": ood.mean(),
-                      **bound_info}
+        return loss, {
+            "critic/loss": loss,
+            "critic/td_loss": td_loss,
+            "critic/cql_loss": cql_loss,
+            "critic/q": qs.mean(),
+            "critic/target_q": target.mean(),
+            "critic/ood_q": ood.mean(),
+            **bound_info,
+        }
 
     def actor_loss(self, actor_params, batch, key):
         dist = self.actor.apply_fn({"params": actor_params}, batch["observations"])
@@ -137,8 +157,15 @@ class CQLAgent(Agent):
             config = config.replace(target_entropy=-float(ex_act.shape[-1]))
         rng, *keys = jax.random.split(jax.random.PRNGKey(seed), 4)
         actor, critic, temp = sac_train_states(config, keys, ex_obs, ex_act)
-        return cls(rng=rng, actor=actor, critic=critic, target_critic_params=copy_tree(critic.params), temp=temp,
-                   config=config, obs_ndim=obs_ndims(ex_obs))
+        return cls(
+            rng=rng,
+            actor=actor,
+            critic=critic,
+            target_critic_params=copy_tree(critic.params),
+            temp=temp,
+            config=config,
+            obs_ndim=obs_ndims(ex_obs),
+        )
 
 
 def get_config() -> Config:

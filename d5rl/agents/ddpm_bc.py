@@ -18,12 +18,20 @@ import jax.numpy as jnp
 import optax
 
 from d5rl.agents.augment import augment_batch
-from d5rl.agents.common import (Agent, ENCODER_DEFAULTS, copy_tree, make_train_state, nonpytree_field, obs_ndims,
-                                prepare_example, release_actor_decay)
+from d5rl.agents.common import (
+    ENCODER_DEFAULTS,
+    Agent,
+    copy_tree,
+    make_train_state,
+    nonpytree_field,
+    obs_ndims,
+    prepare_example,
+    release_actor_decay,
+)
 from d5rl.agents.config import Config
-from d5rl.agents.networks import soft_update
+from d5rl.agents.diffusion import DiffusionNoiseModel, cosine_beta_schedule
 from d5rl.agents.encoders import make_encoder
-from d5rl.agents.diffusion import cosine_beta_schedule, DiffusionNoiseModel
+from d5rl.agents.networks import soft_update
 
 
 def schedule(num_steps: int):
@@ -45,8 +53,9 @@ def diffusion_loss(apply_fn, params, obs, actions, key, num_steps: int):
     return ((eps - noise) ** 2).sum(-1).mean()
 
 
-def ddpm_sample(apply_fn, params, features, key, action_dim: int, num_steps: int, clip: bool = True,
-                temperature: float = 1.0):
+def ddpm_sample(
+    apply_fn, params, features, key, action_dim: int, num_steps: int, clip: bool = True, temperature: float = 1.0
+):
     """Reverse diffusion from N(0, I) for each row of ``features`` → actions (B, A)."""
     betas, alphas, alpha_hats = schedule(num_steps)
     k0, key = jax.random.split(key)
@@ -69,8 +78,14 @@ def ddpm_sample(apply_fn, params, features, key, action_dim: int, num_steps: int
 
 
 def make_diffusion_actor(config: Config, key, ex_obs, ex_act):
-    model = DiffusionNoiseModel(make_encoder(config), ex_act.shape[-1], config.num_blocks, config.hidden_dim,
-                                config.time_dim, config.dropout_rate)
+    model = DiffusionNoiseModel(
+        make_encoder(config),
+        ex_act.shape[-1],
+        config.num_blocks,
+        config.hidden_dim,
+        config.time_dim,
+        config.dropout_rate,
+    )
     lr = config.actor_lr
     if config.actor_decay_steps:
         lr = optax.cosine_decay_schedule(config.actor_lr, config.actor_decay_steps)
@@ -102,8 +117,9 @@ class DiffusionPolicy:
     resolve_config = classmethod(release_actor_decay)  # actor_decay_steps=None: the release's decay horizon
 
     def actor_loss(self, actor_params, batch, key):
-        loss = diffusion_loss(self.actor.apply_fn, actor_params, batch["observations"], batch["actions"], key,
-                              self.config.diffusion_steps)
+        loss = diffusion_loss(
+            self.actor.apply_fn, actor_params, batch["observations"], batch["actions"], key, self.config.diffusion_steps
+        )
         return loss, {"actor/loss": loss}
 
     @jax.jit
@@ -135,8 +151,16 @@ class DDPMBCAgent(DiffusionPolicy, Agent):
     def _act(self, obs, seed, temperature):
         p = self.target_actor_params
         feats = self.actor.apply_fn({"params": p}, obs, method="encode")
-        return ddpm_sample(self.actor.apply_fn, p, feats, seed, self.config.action_dim, self.config.diffusion_steps,
-                           self.config.clip_sampler, temperature)
+        return ddpm_sample(
+            self.actor.apply_fn,
+            p,
+            feats,
+            seed,
+            self.config.action_dim,
+            self.config.diffusion_steps,
+            self.config.clip_sampler,
+            temperature,
+        )
 
     @classmethod
     def create(cls, seed: int, example_observations, example_actions, config: Config | None = None):
@@ -145,7 +169,9 @@ class DDPMBCAgent(DiffusionPolicy, Agent):
         config = config.replace(action_dim=int(ex_act.shape[-1]))
         rng, k_a = jax.random.split(jax.random.PRNGKey(seed))
         actor = make_diffusion_actor(config, k_a, ex_obs, ex_act)
-        return cls(rng=rng, actor=actor, target_actor_params=copy_tree(actor.params), config=config, obs_ndim=obs_ndims(ex_obs))
+        return cls(
+            rng=rng, actor=actor, target_actor_params=copy_tree(actor.params), config=config, obs_ndim=obs_ndims(ex_obs)
+        )
 
 
 def get_config() -> Config:

@@ -9,7 +9,7 @@ proprioception is concatenated after it.
 
 from __future__ import annotations
 
-from typing import Sequence
+from collections.abc import Sequence
 
 import flax.linen as nn
 import jax
@@ -29,14 +29,13 @@ def is_pixel_obs(obs) -> bool:
     return bool(pixel_keys(obs))
 
 
-
 # --- pixel encoder ------------------------------------------------------------------------------
 def _pool_taps(x):
     """The 3x3 taps of every stride-2 window of an even-sized NHWC map, SAME padding (one -inf
     row/column at the bottom/right, as ``nn.max_pool(..., padding="SAME")`` pads)."""
     h, w = x.shape[-3:-1]
     xp = jnp.pad(x, ((0, 0),) * (x.ndim - 3) + ((0, 1), (0, 1), (0, 0)), constant_values=-jnp.inf)
-    return [[xp[..., i:i + h:2, j:j + w:2, :] for j in range(3)] for i in range(3)]
+    return [[xp[..., i : i + h : 2, j : j + w : 2, :] for j in range(3)] for i in range(3)]
 
 
 def _pool_forward(x):

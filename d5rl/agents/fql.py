@@ -17,15 +17,23 @@ Metrics: ``critic/loss``, ``critic/q``, ``critic/target_q``, ``actor/loss``, ``a
 
 from __future__ import annotations
 
-from typing import Any, Sequence
+from collections.abc import Sequence
+from typing import Any
 
 import flax.linen as nn
 import jax
 import jax.numpy as jnp
 
 from d5rl.agents.augment import augment_batch
-from d5rl.agents.common import (ENCODER_DEFAULTS, Agent, copy_tree, make_train_state, nonpytree_field, obs_ndims,
-                                prepare_example)
+from d5rl.agents.common import (
+    ENCODER_DEFAULTS,
+    Agent,
+    copy_tree,
+    make_train_state,
+    nonpytree_field,
+    obs_ndims,
+    prepare_example,
+)
 from d5rl.agents.config import Config
 from d5rl.agents.encoders import make_encoder
 from d5rl.agents.networks import MLP, Critic, default_init, soft_update
@@ -106,8 +114,13 @@ class FQLAgent(Agent):
             q_loss = q_loss / jax.lax.stop_gradient(jnp.abs(q).mean() + 1e-8)
         loss = cfg.alpha * distill + q_loss
         mse = ((self._act(actor_params, obs, k_eval) - batch["actions"]) ** 2).mean()
-        return loss, {"actor/loss": loss, "actor/distill_loss": distill, "actor/q_loss": q_loss, "actor/q": q.mean(),
-                      "actor/mse": mse}
+        return loss, {
+            "actor/loss": loss,
+            "actor/distill_loss": distill,
+            "actor/q_loss": q_loss,
+            "actor/q": q.mean(),
+            "actor/mse": mse,
+        }
 
     def _update(self, batch):
         rng, aug_key, k_critic, k_flow, k_actor = jax.random.split(self.rng, 5)
@@ -146,8 +159,15 @@ class FQLAgent(Agent):
         critic = make_train_state(critic_def, k_c, (ex_obs, ex_act), config.lr)
         bc_flow = make_train_state(flow_def, k_f, (ex_obs, ex_act, t), config.lr)
         actor = make_train_state(actor_def, k_a, (ex_obs, ex_act), config.lr)
-        return cls(rng=rng, critic=critic, target_critic_params=copy_tree(critic.params), bc_flow=bc_flow,
-                   actor=actor, config=config, obs_ndim=obs_ndims(ex_obs))
+        return cls(
+            rng=rng,
+            critic=critic,
+            target_critic_params=copy_tree(critic.params),
+            bc_flow=bc_flow,
+            actor=actor,
+            config=config,
+            obs_ndim=obs_ndims(ex_obs),
+        )
 
 
 def _batch_shape(obs) -> tuple:

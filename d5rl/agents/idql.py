@@ -18,12 +18,20 @@ import jax
 import jax.numpy as jnp
 
 from d5rl.agents.augment import augment_batch
-from d5rl.agents.common import Agent, ENCODER_DEFAULTS, copy_tree, make_train_state, nonpytree_field, obs_ndims, prepare_example
+from d5rl.agents.common import (
+    ENCODER_DEFAULTS,
+    Agent,
+    copy_tree,
+    make_train_state,
+    nonpytree_field,
+    obs_ndims,
+    prepare_example,
+)
 from d5rl.agents.config import Config, ConfigError
 from d5rl.agents.ddpm_bc import DiffusionPolicy, ddpm_sample, diffusion_config, make_diffusion_actor
-from d5rl.agents.iql import IQLLosses
-from d5rl.agents.networks import Critic, soft_update, ValueCritic
 from d5rl.agents.encoders import make_encoder
+from d5rl.agents.iql import IQLLosses
+from d5rl.agents.networks import Critic, ValueCritic, soft_update
 
 
 class IDQLAgent(DiffusionPolicy, IQLLosses, Agent):
@@ -51,13 +59,16 @@ class IDQLAgent(DiffusionPolicy, IQLLosses, Agent):
         actor, ema = agent.actor, agent.target_actor_params
         size = batch["actions"].shape[0] // cfg.actor_steps
         for i, key in enumerate(keys):
-            part = jax.tree_util.tree_map(lambda x: x[i * size:(i + 1) * size], batch)  # noqa: B023
+            part = jax.tree_util.tree_map(lambda x: x[i * size : (i + 1) * size], batch)
             g, actor_info = jax.grad(agent.actor_loss, has_aux=True)(actor.params, part, key)
             actor = actor.apply_gradients(grads=g)
             ema = soft_update(ema, actor.params, cfg.actor_ema)
         agent = agent.replace(
-            critic=critic, target_critic_params=soft_update(agent.target_critic_params, critic.params, cfg.tau),
-            actor=actor, target_actor_params=ema)
+            critic=critic,
+            target_critic_params=soft_update(agent.target_critic_params, critic.params, cfg.tau),
+            actor=actor,
+            target_actor_params=ema,
+        )
         return agent, {**value_info, **critic_info, **actor_info}
 
     def _act(self, obs, seed, temperature):
@@ -66,8 +77,9 @@ class IDQLAgent(DiffusionPolicy, IQLLosses, Agent):
         feats = self.actor.apply_fn({"params": p}, obs, method="encode")
         b = feats.shape[0]
         feats = jnp.repeat(feats, n, axis=0)  # (B·N, F), N consecutive rows per observation
-        actions = ddpm_sample(self.actor.apply_fn, p, feats, seed, cfg.action_dim, cfg.diffusion_steps,
-                              cfg.clip_sampler, temperature)
+        actions = ddpm_sample(
+            self.actor.apply_fn, p, feats, seed, cfg.action_dim, cfg.diffusion_steps, cfg.clip_sampler, temperature
+        )
         q_feats = self.critic.apply_fn({"params": self.target_critic_params}, obs, method="encode")
         q_feats = jnp.repeat(q_feats, n, axis=0)
         q = self.critic.apply_fn({"params": self.target_critic_params}, q_feats, actions, method="head").min(0)
@@ -80,16 +92,27 @@ class IDQLAgent(DiffusionPolicy, IQLLosses, Agent):
         ex_obs, ex_act = prepare_example(example_observations, example_actions)
         config = config.replace(action_dim=int(ex_act.shape[-1]))
         if config.actor_steps < 1 or config.batch_size % config.actor_steps:
-            raise ConfigError(f"idql: batch_size {config.batch_size} does not split into actor_steps "
-                              f"{config.actor_steps} equal parts", "pick a batch size divisible by actor_steps")
+            raise ConfigError(
+                f"idql: batch_size {config.batch_size} does not split into actor_steps "
+                f"{config.actor_steps} equal parts",
+                "pick a batch size divisible by actor_steps",
+            )
         rng, k_a, k_c, k_v = jax.random.split(jax.random.PRNGKey(seed), 4)
         actor = make_diffusion_actor(config, k_a, ex_obs, ex_act)
         critic_def = Critic(make_encoder(config), config.critic_hidden_dims, config.num_qs, config.critic_layer_norm)
         value_def = ValueCritic(make_encoder(config), config.critic_hidden_dims, config.critic_layer_norm)
         critic = make_train_state(critic_def, k_c, (ex_obs, ex_act), config.critic_lr)
         value = make_train_state(value_def, k_v, (ex_obs,), config.value_lr)
-        return cls(rng=rng, actor=actor, target_actor_params=copy_tree(actor.params), critic=critic,
-                   target_critic_params=copy_tree(critic.params), value=value, config=config, obs_ndim=obs_ndims(ex_obs))
+        return cls(
+            rng=rng,
+            actor=actor,
+            target_actor_params=copy_tree(actor.params),
+            critic=critic,
+            target_critic_params=copy_tree(critic.params),
+            value=value,
+            config=config,
+            obs_ndim=obs_ndims(ex_obs),
+        )
 
 
 def get_config() -> Config:

@@ -17,10 +17,19 @@ import jax.numpy as jnp
 import optax
 
 from d5rl.agents.augment import augment_batch
-from d5rl.agents.common import Agent, ENCODER_DEFAULTS, auto_actor_decay, copy_tree, make_train_state, nonpytree_field, obs_ndims, prepare_example
+from d5rl.agents.common import (
+    ENCODER_DEFAULTS,
+    Agent,
+    auto_actor_decay,
+    copy_tree,
+    make_train_state,
+    nonpytree_field,
+    obs_ndims,
+    prepare_example,
+)
 from d5rl.agents.config import Config
-from d5rl.agents.networks import Critic, GaussianPolicy, soft_update, ValueCritic
 from d5rl.agents.encoders import make_encoder
+from d5rl.agents.networks import Critic, GaussianPolicy, ValueCritic, soft_update
 
 
 def expectile_loss(diff, expectile: float):
@@ -97,16 +106,29 @@ class IQLAgent(IQLLosses, Agent):
         config = get_config() if config is None else config
         ex_obs, ex_act = prepare_example(example_observations, example_actions)
         rng, k_a, k_c, k_v = jax.random.split(jax.random.PRNGKey(seed), 4)
-        actor_def = GaussianPolicy(make_encoder(config), config.hidden_dims, ex_act.shape[-1], tanh_squash=False,
-                                   log_std_min=config.log_std_min, log_std_max=config.log_std_max,
-                                   state_dependent_std=config.state_dependent_std)
+        actor_def = GaussianPolicy(
+            make_encoder(config),
+            config.hidden_dims,
+            ex_act.shape[-1],
+            tanh_squash=False,
+            log_std_min=config.log_std_min,
+            log_std_max=config.log_std_max,
+            state_dependent_std=config.state_dependent_std,
+        )
         critic_def = Critic(make_encoder(config), config.hidden_dims, config.num_qs, config.critic_layer_norm)
         value_def = ValueCritic(make_encoder(config), config.hidden_dims, config.critic_layer_norm)
         actor = make_train_state(actor_def, k_a, (ex_obs,), actor_schedule(config))
         critic = make_train_state(critic_def, k_c, (ex_obs, ex_act), config.critic_lr)
         value = make_train_state(value_def, k_v, (ex_obs,), config.value_lr)
-        return cls(rng=rng, actor=actor, critic=critic, target_critic_params=copy_tree(critic.params), value=value,
-                   config=config, obs_ndim=obs_ndims(ex_obs))
+        return cls(
+            rng=rng,
+            actor=actor,
+            critic=critic,
+            target_critic_params=copy_tree(critic.params),
+            value=value,
+            config=config,
+            obs_ndim=obs_ndims(ex_obs),
+        )
 
 
 def get_config() -> Config:

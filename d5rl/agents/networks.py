@@ -6,7 +6,8 @@ SAC temperature.  Encoders: :mod:`d5rl.agents.encoders`; diffusion noise models:
 from __future__ import annotations
 
 import math
-from typing import Any, Callable, Sequence
+from collections.abc import Callable, Sequence
+from typing import Any
 
 import flax
 import flax.linen as nn
@@ -58,7 +59,9 @@ class Ensemble(nn.Module):
             out_axes=0,
             axis_size=self.num,
         )
-        out = vmapped(tuple(self.hidden_dims) + (1,), layer_norm=self.layer_norm, dropout_rate=self.dropout_rate)(x, train)
+        out = vmapped(tuple(self.hidden_dims) + (1,), layer_norm=self.layer_norm, dropout_rate=self.dropout_rate)(
+            x, train
+        )
         return out[..., 0]
 
 
@@ -147,8 +150,11 @@ class Gaussian:
 
     def sample_n_and_log_prob(self, key, n: int):
         """``n`` samples per distribution: shapes ``(n, *batch, A)`` and ``(n, *batch)``."""
-        wide = Gaussian(jnp.broadcast_to(self.loc, (n,) + self.loc.shape),
-                        jnp.broadcast_to(self.log_std, (n,) + self.log_std.shape), self.tanh)
+        wide = Gaussian(
+            jnp.broadcast_to(self.loc, (n,) + self.loc.shape),
+            jnp.broadcast_to(self.log_std, (n,) + self.log_std.shape),
+            self.tanh,
+        )
         return wide.sample_and_log_prob(key)
 
     def log_prob(self, actions):
@@ -183,8 +189,9 @@ class GaussianPolicy(nn.Module):
     @nn.compact
     def __call__(self, obs, temperature: float = 1.0, train: bool = False):
         h = self.encoder(obs)
-        h = MLP(self.hidden_dims, activate_final=True, layer_norm=self.layer_norm,
-                dropout_rate=self.dropout_rate)(h, train)
+        h = MLP(self.hidden_dims, activate_final=True, layer_norm=self.layer_norm, dropout_rate=self.dropout_rate)(
+            h, train
+        )
         loc = nn.Dense(self.action_dim, kernel_init=default_init)(h)
         if self.fixed_std:
             log_std = jnp.zeros_like(loc)

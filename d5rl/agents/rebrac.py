@@ -35,8 +35,12 @@ class ReBRACAgent(TD3BCAgent):
         target = jax.lax.stop_gradient(target)
         qs = self.critic.apply_fn({"params": critic_params}, batch["observations"], batch["actions"])
         loss = ((qs - target[None]) ** 2).mean(axis=1).sum()
-        return loss, {"critic/loss": loss, "critic/q": qs.mean(), "critic/target_q": target.mean(),
-                      "critic/bc_penalty": penalty.mean()}
+        return loss, {
+            "critic/loss": loss,
+            "critic/q": qs.mean(),
+            "critic/target_q": target.mean(),
+            "critic/bc_penalty": penalty.mean(),
+        }
 
     def actor_loss(self, actor_params, batch):
         pi = self.actor.apply_fn({"params": actor_params}, batch["observations"])

@@ -20,8 +20,17 @@ import jax
 import numpy as np
 
 from d5rl.agents.augment import augment_batch
-from d5rl.agents.common import (ENCODER_DEFAULTS, Agent, copy_tree, nonpytree_field, obs_ndims, prepare_example,
-                                sac_critic, sac_train_states, split_utd)
+from d5rl.agents.common import (
+    ENCODER_DEFAULTS,
+    Agent,
+    copy_tree,
+    nonpytree_field,
+    obs_ndims,
+    prepare_example,
+    sac_critic,
+    sac_train_states,
+    split_utd,
+)
 from d5rl.agents.config import Config
 from d5rl.agents.encoders import is_pixel_obs
 from d5rl.agents.networks import ensemble_members, soft_update
@@ -49,8 +58,9 @@ class RLPDAgent(Agent):
             temperature = self.temp.apply_fn({"params": self.temp.params})
             target = target - gamma * batch["masks"] * temperature * next_logp
         target = jax.lax.stop_gradient(target)
-        qs = self.critic.apply_fn({"params": critic_params}, batch["observations"], batch["actions"], True,
-                                  rngs={"dropout": k_drop})
+        qs = self.critic.apply_fn(
+            {"params": critic_params}, batch["observations"], batch["actions"], True, rngs={"dropout": k_drop}
+        )
         loss = ((qs - target[None]) ** 2).mean()
         return loss, {"critic/loss": loss, "critic/q": qs.mean(), "critic/target_q": target.mean()}
 
@@ -69,8 +79,9 @@ class RLPDAgent(Agent):
         k_act, k_drop = jax.random.split(key)
         dist = self.actor.apply_fn({"params": actor_params}, batch["observations"])
         actions, logp = dist.sample_and_log_prob(k_act)
-        qs = self.critic.apply_fn({"params": self.critic.params}, batch["observations"], actions, True,
-                                  rngs={"dropout": k_drop})
+        qs = self.critic.apply_fn(
+            {"params": self.critic.params}, batch["observations"], actions, True, rngs={"dropout": k_drop}
+        )
         temperature = self.temp.apply_fn({"params": self.temp.params})
         loss = (temperature * logp - qs.mean(axis=0)).mean()
         return loss, {"actor/loss": loss, "actor/entropy": -logp.mean()}
@@ -149,8 +160,15 @@ class RLPDAgent(Agent):
             config = config.replace(target_entropy=-action_dim / 2)
         rng, *keys = jax.random.split(jax.random.PRNGKey(seed), 4)
         actor, critic, temp = sac_train_states(config, keys, ex_obs, ex_act, config.critic_dropout)
-        return cls(rng=rng, actor=actor, critic=critic, target_critic_params=copy_tree(critic.params), temp=temp,
-                   config=config, obs_ndim=obs_ndims(ex_obs))
+        return cls(
+            rng=rng,
+            actor=actor,
+            critic=critic,
+            target_critic_params=copy_tree(critic.params),
+            temp=temp,
+            config=config,
+            obs_ndim=obs_ndims(ex_obs),
+        )
 
 
 def get_config() -> Config:

@@ -21,14 +21,20 @@ from typing import Any
 
 import jax
 import jax.numpy as jnp
-import numpy as np
 
 from d5rl.agents.augment import augment_batch
-from d5rl.agents.common import copy_tree, ENCODER_DEFAULTS, Agent, make_train_state, nonpytree_field, obs_ndims, prepare_example
+from d5rl.agents.common import (
+    ENCODER_DEFAULTS,
+    Agent,
+    copy_tree,
+    make_train_state,
+    nonpytree_field,
+    obs_ndims,
+    prepare_example,
+)
 from d5rl.agents.config import Config, ConfigError
-from d5rl.agents.networks import Critic, DeterministicPolicy, soft_update
 from d5rl.agents.encoders import is_pixel_obs, make_encoder
-
+from d5rl.agents.networks import Critic, DeterministicPolicy, soft_update
 
 ACTOR_METRICS = ("actor/loss", "actor/bc_mse", "actor/q", "actor/lambda")
 
@@ -73,15 +79,21 @@ class TD3BCAgent(Agent):
         g, info = jax.grad(self.actor_loss, has_aux=True)(self.actor.params, batch)
         actor = self.actor.apply_gradients(grads=g)
         tau = self.config.tau
-        return self.replace(actor=actor, target_actor_params=soft_update(self.target_actor_params, actor.params, tau),
-                            target_critic_params=soft_update(self.target_critic_params, self.critic.params, tau)), info
+        return self.replace(
+            actor=actor,
+            target_actor_params=soft_update(self.target_actor_params, actor.params, tau),
+            target_critic_params=soft_update(self.target_critic_params, self.critic.params, tau),
+        ), info
 
     def _critic_step(self, batch):
         """Augment and normalise ``batch``, update the critic; returns ``(agent, batch, metrics)``."""
         rng, aug_key, key = jax.random.split(self.rng, 3)
         batch = augment_batch(aug_key, batch, self.config)
-        batch = {**batch, "observations": self.normalize(batch["observations"]),
-                 "next_observations": self.normalize(batch["next_observations"])}
+        batch = {
+            **batch,
+            "observations": self.normalize(batch["observations"]),
+            "next_observations": self.normalize(batch["next_observations"]),
+        }
         g, critic_info = jax.grad(self.critic_loss, has_aux=True)(self.critic.params, batch, key)
         return self.replace(rng=rng, critic=self.critic.apply_gradients(grads=g)), batch, critic_info
 
@@ -93,8 +105,9 @@ class TD3BCAgent(Agent):
         due = self._actor_due()
         agent, batch, critic_info = self._critic_step(batch)
         if not is_pixel_obs(batch["observations"]):
-            agent, actor_info = jax.lax.cond(due, lambda a: a._update_actor(batch),
-                                             lambda a: (a, no_actor_metrics()), agent)
+            agent, actor_info = jax.lax.cond(
+                due, lambda a: a._update_actor(batch), lambda a: (a, no_actor_metrics()), agent
+            )
         else:
             # XLA:CPU runs convolutions inside a lax.cond branch ~10-20x slower (6.6 s vs 0.55 s per
             # pixel update), so inside one program (update_many) pixel agents compute the actor step
@@ -145,15 +158,29 @@ class TD3BCAgent(Agent):
         rng, k_a, k_c = jax.random.split(jax.random.PRNGKey(seed), 3)
         output, actor_q = config.get("actor_output", "tanh"), config.get("actor_q", "first")  # ReBRAC: TD3's
         if output not in ("tanh", "clip") or actor_q not in ("first", "mean"):
-            raise ConfigError(f"{config.agent_name}: actor_output={output!r}, actor_q={actor_q!r}",
-                              "actor_output is tanh or clip; actor_q is first or mean")
-        actor_def = DeterministicPolicy(make_encoder(config), config.hidden_dims, ex_act.shape[-1],
-                                        layer_norm=config.actor_layer_norm, output=output)
+            raise ConfigError(
+                f"{config.agent_name}: actor_output={output!r}, actor_q={actor_q!r}",
+                "actor_output is tanh or clip; actor_q is first or mean",
+            )
+        actor_def = DeterministicPolicy(
+            make_encoder(config),
+            config.hidden_dims,
+            ex_act.shape[-1],
+            layer_norm=config.actor_layer_norm,
+            output=output,
+        )
         critic_def = Critic(make_encoder(config), config.hidden_dims, 2, config.critic_layer_norm)
         actor = make_train_state(actor_def, k_a, (ex_obs,), config.actor_lr)
         critic = make_train_state(critic_def, k_c, (ex_obs, ex_act), config.critic_lr)
-        return cls(rng=rng, actor=actor, target_actor_params=copy_tree(actor.params), critic=critic,
-                   target_critic_params=copy_tree(critic.params), config=config, obs_ndim=obs_ndims(ex_obs))
+        return cls(
+            rng=rng,
+            actor=actor,
+            target_actor_params=copy_tree(actor.params),
+            critic=critic,
+            target_critic_params=copy_tree(critic.params),
+            config=config,
+            obs_ndim=obs_ndims(ex_obs),
+        )
 
 
 def get_config() -> Config:

@@ -47,9 +47,23 @@ def overview_extras(spec, ds) -> list[dict]:
     stages = [k for k in s if k.startswith("stage")]
     out = []
     for measure in ("grasped (lifted off the table)", "placed in the intended bin", "ended in its correct bin"):
-        out.append({"title": f"Success profile: {measure}", "x": stages, "y": [s[k][measure] for k in stages],
-                    "xlabel": "stage of the script", "ylabel": "share of episodes"})
+        out.append(
+            {
+                "title": f"Success profile: {measure}",
+                "x": stages,
+                "y": [s[k][measure] for k in stages],
+                "xlabel": "stage of the script",
+                "ylabel": "share of episodes",
+            }
+        )
     final = s["final objects sorted"]
-    out.append({"title": "Objects in their correct bin at the end", "x": [str(k) for k in final],
-                "y": [final[k] for k in final], "xlabel": "objects sorted", "ylabel": "share of episodes"})
+    out.append(
+        {
+            "title": "Objects in their correct bin at the end",
+            "x": [str(k) for k in final],
+            "y": [final[k] for k in final],
+            "xlabel": "objects sorted",
+            "ylabel": "share of episodes",
+        }
+    )
     return out

@@ -45,12 +45,15 @@ class NoFrames(Exception):
 
 
 def camera_name(key: str) -> str:
-    return key[len("observations/pixels/"):] if key.startswith("observations/pixels/") else key.split("/")[-1]
+    return key[len("observations/pixels/") :] if key.startswith("observations/pixels/") else key.split("/")[-1]
 
 
 def pixel_keys(arrays) -> list[str]:
-    return sorted(k for k, v in arrays.items() if k.startswith("observations/pixels")
-                  and len(v.shape) == 4 and v.shape[-1] == 3 and v.dtype == np.uint8)
+    return sorted(
+        k
+        for k, v in arrays.items()
+        if k.startswith("observations/pixels") and len(v.shape) == 4 and v.shape[-1] == 3 and v.dtype == np.uint8
+    )
 
 
 def write_strip(path: Path, frames: np.ndarray) -> dict:
@@ -64,7 +67,7 @@ def write_strip(path: Path, frames: np.ndarray) -> dict:
     canvas = np.zeros((rows * h, cols * w, 3), np.uint8)
     for k in range(n):
         r, c = divmod(k, cols)
-        canvas[r * h:(r + 1) * h, c * w:(c + 1) * w] = frames[k]
+        canvas[r * h : (r + 1) * h, c * w : (c + 1) * w] = frames[k]
     buf = io.BytesIO()
     if path.suffix == ".png":
         Image.fromarray(canvas).save(buf, "PNG", optimize=False)
@@ -177,8 +180,9 @@ def render_cache_episode(spec, index: int) -> dict[str, np.ndarray] | None:
                 rec = fmt.read_shard_record(Path(cache) / entry["name"])
                 if rec.get("source_states_sha256") != entry["arrays"]["states"]["sha256"]:
                     return None
-        ds = load_dataset(spec, episodes=shards[-1]["episodes"][1], generate=False, progress=False,
-                          in_memory=False, workers=1)
+        ds = load_dataset(
+            spec, episodes=shards[-1]["episodes"][1], generate=False, progress=False, in_memory=False, workers=1
+        )
         ep = ds.episode(index)
         keys = pixel_keys(ep.arrays)
         return {k: ep.arrays[k] for k in keys} or None

@@ -11,6 +11,7 @@ from d5rl.browse.catalog import json_floats
 from d5rl.runner import report
 from d5rl.runner.paper import paper_result, paper_task
 
+
 def run_labels(run_dirs: list[Path]) -> list[str]:
     """A name for each run directory that tells it from the others: its path relative to the directories'
     common parent.  A label that would be the bare grid folder (``cells``) keeps the folder above it, so
@@ -43,13 +44,26 @@ def comparison_rows(results: list[report.CellResult], phase: str) -> list[dict]:
         scores = report.score_table(cells, phase)[(task, algo)]
         lo, hi = report.seed_interval(scores)
         paper = paper_result(task, algo, phase)
-        rows.append({"environment": report.environment(task), "task": task, "algo": algo,
-                     "method": report.method_name(algo), "n": int(scores.size), "mean": float(scores.mean()),
-                     "std": float(scores.std()), "text": report.mean_std(scores.mean(), scores.std()),
-                     "ci": [lo, hi], "ci_text": report.interval(lo, hi), "seeds": [c.seed for c in cells],
-                     "scores": json_floats(scores), "steps": report.steps_label(cells),
-                     "paper_task": paper_task(task), "paper": None if paper is None else list(paper),
-                     "paper_text": report.paper_entry(paper)})
+        rows.append(
+            {
+                "environment": report.environment(task),
+                "task": task,
+                "algo": algo,
+                "method": report.method_name(algo),
+                "n": int(scores.size),
+                "mean": float(scores.mean()),
+                "std": float(scores.std()),
+                "text": report.mean_std(scores.mean(), scores.std()),
+                "ci": [lo, hi],
+                "ci_text": report.interval(lo, hi),
+                "seeds": [c.seed for c in cells],
+                "scores": json_floats(scores),
+                "steps": report.steps_label(cells),
+                "paper_task": paper_task(task),
+                "paper": None if paper is None else list(paper),
+                "paper_text": report.paper_entry(paper),
+            }
+        )
     return rows
 
 
@@ -65,21 +79,48 @@ def run_summary(run_dir: Path) -> dict:
     curves = []
     for task, cells in sorted(by_task.items()):
         for algo, (steps, mean, std) in report.mean_curves(cells).items():
-            curves.append({"task": task, "algo": algo, "method": report.method_name(algo),
-                           "steps": steps.tolist(), "mean": json_floats(mean), "std": json_floats(std),
-                           "seeds": len({c.seed for c in cells if c.algo == algo})})
+            curves.append(
+                {
+                    "task": task,
+                    "algo": algo,
+                    "method": report.method_name(algo),
+                    "steps": steps.tolist(),
+                    "mean": json_floats(mean),
+                    "std": json_floats(std),
+                    "seeds": len({c.seed for c in cells if c.algo == algo}),
+                }
+            )
     tables = {}
     for phase in ("offline", "online"):
         rows = comparison_rows(results, phase)
         if rows:
             tables[phase] = rows
-    cells = [{"task": r.task, "algo": r.algo, "method": report.method_name(r.algo), "seed": r.seed, "done": r.done,
-              "final": r.final, "evaluations": len(r.evals), "failures": r.failures,
-              "videos": [os.path.relpath(v, run_dir) for v in r.videos[-report.VIDEOS_PER_CELL:]]}
-             for r in sorted(results, key=lambda r: (r.task, r.algo, r.seed))]
-    return {"name": run_dir.name, "path": str(run_dir), "cells": cells, "curves": curves, "tables": tables,
-            "tasks": [{"task": t, "environment": report.environment(t)}
-                      for t in sorted({r.task for r in results}, key=report.task_order)],
-            "environments": [label for _, label in report.ENVIRONMENTS],
-            "methods": report.method_order({r.algo for r in results}),
-            "behaviour": report.behaviour_table(results), "behaviour_note": report.BEHAVIOUR_NOTE}
+    cells = [
+        {
+            "task": r.task,
+            "algo": r.algo,
+            "method": report.method_name(r.algo),
+            "seed": r.seed,
+            "done": r.done,
+            "final": r.final,
+            "evaluations": len(r.evals),
+            "failures": r.failures,
+            "videos": [os.path.relpath(v, run_dir) for v in r.videos[-report.VIDEOS_PER_CELL :]],
+        }
+        for r in sorted(results, key=lambda r: (r.task, r.algo, r.seed))
+    ]
+    return {
+        "name": run_dir.name,
+        "path": str(run_dir),
+        "cells": cells,
+        "curves": curves,
+        "tables": tables,
+        "tasks": [
+            {"task": t, "environment": report.environment(t)}
+            for t in sorted({r.task for r in results}, key=report.task_order)
+        ],
+        "environments": [label for _, label in report.ENVIRONMENTS],
+        "methods": report.method_order({r.algo for r in results}),
+        "behaviour": report.behaviour_table(results),
+        "behaviour_note": report.BEHAVIOUR_NOTE,
+    }

@@ -56,7 +56,7 @@ def host_allowed(header: str, names: frozenset[str]) -> bool:
     """Whether a ``Host`` header (``name``, ``name:port``, ``[v6]:port``) names this server."""
     h = header.strip().lower()
     if h.startswith("["):
-        h = h[1:h.find("]")] if "]" in h else ""
+        h = h[1 : h.find("]")] if "]" in h else ""
     elif h.count(":") == 1:
         h = h.split(":")[0]
     h = h.rstrip(".")
@@ -83,8 +83,10 @@ class HostCheck:
             if not host_allowed(host, self.names):
                 from starlette.responses import PlainTextResponse
 
-                msg = (f"Host {host!r} is not a name of this d5rl browse server; open it as http://localhost:PORT/ "
-                       "or start it with --host NAME")
+                msg = (
+                    f"Host {host!r} is not a name of this d5rl browse server; open it as http://localhost:PORT/ "
+                    "or start it with --host NAME"
+                )
                 await PlainTextResponse(msg, status_code=400)(scope, receive, send)
                 return
         await self.app(scope, receive, send)
@@ -121,8 +123,10 @@ def create_app(run_dirs: list[Path] | None = None, host: str | None = None):
                 hint = getattr(e, "hint", None)
                 return JSONResponse({"error": str(msg), "hint": hint}, status_code=404)
             except (D5RLError, ValueError) as e:
-                return JSONResponse({"error": getattr(e, "message", str(e)), "hint": getattr(e, "hint", None)},
-                                    status_code=400)
+                return JSONResponse(
+                    {"error": getattr(e, "message", str(e)), "hint": getattr(e, "hint", None)}, status_code=400
+                )
+
         endpoint.__name__ = fn.__name__
         return endpoint
 
@@ -147,9 +151,14 @@ def create_app(run_dirs: list[Path] | None = None, host: str | None = None):
         return FileResponse(STATIC / "index.html")
 
     def tasks(request):
-        return JSONResponse({"tasks": catalog.all_tasks(),
-                             "runs": [{"index": k, "name": r.name, "label": run_labels[k], "path": str(r)}
-                                      for k, r in enumerate(run_dirs)]})
+        return JSONResponse(
+            {
+                "tasks": catalog.all_tasks(),
+                "runs": [
+                    {"index": k, "name": r.name, "label": run_labels[k], "path": str(r)} for k, r in enumerate(run_dirs)
+                ],
+            }
+        )
 
     def task(request):
         return JSONResponse(catalog.task_summary(task_id(request)))
@@ -171,8 +180,11 @@ def create_app(run_dirs: list[Path] | None = None, host: str | None = None):
 
     def frame_strip(request):
         path = frames.strip_path(task_id(request), index_of(request), request.path_params["camera"])
-        return FileResponse(path, media_type="image/png" if path.suffix == ".png" else "image/jpeg",
-                            headers={"Cache-Control": "no-cache"})
+        return FileResponse(
+            path,
+            media_type="image/png" if path.suffix == ".png" else "image/jpeg",
+            headers={"Cache-Control": "no-cache"},
+        )
 
     def datacard(request):
         path = file_under(catalog.DOCS, request.path_params["name"], (".md",))
@@ -205,6 +217,7 @@ def create_app(run_dirs: list[Path] | None = None, host: str | None = None):
         Route("/vendor/plotly.min.js", plotly_bundle),
         Mount("/static", app=StaticFiles(directory=STATIC), name="static"),
     ]
+
     @contextlib.asynccontextmanager
     async def lifespan(app):
         yield
@@ -219,9 +232,10 @@ def serve(host: str, port: int, run_dirs: list[Path]) -> None:
     try:
         import uvicorn
     except ModuleNotFoundError:
-        raise D5RLError("`d5rl browse` needs the browse extra (starlette, uvicorn, plotly)",
-                        "pip install 'd5rl[browse]' (from a checkout: "
-                        "bash -c 'source scripts/install.sh train,browse')") from None
+        raise D5RLError(
+            "`d5rl browse` needs the browse extra (starlette, uvicorn, plotly)",
+            "pip install 'd5rl[browse]' (from a checkout: bash -c 'source scripts/install.sh train,browse')",
+        ) from None
     for r in run_dirs:
         if not Path(r).is_dir():
             raise D5RLError(f"run directory {r} does not exist", "pass the --out directory of `d5rl bench`")
@@ -231,14 +245,18 @@ def serve(host: str, port: int, run_dirs: list[Path]) -> None:
         try:
             s.bind((host, port))
         except socket.gaierror as e:  # not an address or a name of this machine
-            raise D5RLError(f"cannot listen on {host}: {e.strerror}",
-                            "pass an address of this machine with --host (omit it for 127.0.0.1)") from None
+            raise D5RLError(
+                f"cannot listen on {host}: {e.strerror}",
+                "pass an address of this machine with --host (omit it for 127.0.0.1)",
+            ) from None
         except OSError as e:
             raise D5RLError(f"cannot listen on {host}:{port}: {e.strerror}", "pick another port with --port") from None
     app = create_app(run_dirs, host)
     if host not in ("127.0.0.1", "localhost", "::1"):
-        print(f"warning: listening on {host}: anyone who can reach this machine can read your datasets and runs",
-              file=sys.stderr)
+        print(
+            f"warning: listening on {host}: anyone who can reach this machine can read your datasets and runs",
+            file=sys.stderr,
+        )
     print(f"d5rl browse: http://{'[' + host + ']' if ':' in host else host}:{port}/  (Ctrl-C stops)", flush=True)
     uvicorn.run(app, host=host, port=port, log_level="warning")
 
@@ -249,10 +267,10 @@ def cmd_browse(args) -> int:
 
 
 def add_browse_parser(sub) -> None:
-    q = sub.add_parser("browse", help="a local web page: tasks, datasets, episodes with their frames and rewards, "
-                                      "benchmark runs")
+    q = sub.add_parser(
+        "browse", help="a local web page: tasks, datasets, episodes with their frames and rewards, benchmark runs"
+    )
     q.add_argument("runs", nargs="*", metavar="RUN_DIR", help="`d5rl bench` run directories to show side by side")
     q.add_argument("--port", type=int, default=DEFAULT_PORT, help=f"port (default {DEFAULT_PORT})")
-    q.add_argument("--host", default="127.0.0.1",
-                   help="address to listen on (default 127.0.0.1: this machine only)")
+    q.add_argument("--host", default="127.0.0.1", help="address to listen on (default 127.0.0.1: this machine only)")
     q.set_defaults(func=cmd_browse)

@@ -51,8 +51,14 @@ class ChunkWriter:
     """Streams rows into a ``.zch`` file: :meth:`append` one episode (or any run of rows that must
     start a new chunk) at a time, then :meth:`close`."""
 
-    def __init__(self, path: str | os.PathLike, row_shape: tuple[int, ...], dtype, chunk_rows: int = CHUNK_ROWS,
-                 level: int = LEVEL):
+    def __init__(
+        self,
+        path: str | os.PathLike,
+        row_shape: tuple[int, ...],
+        dtype,
+        chunk_rows: int = CHUNK_ROWS,
+        level: int = LEVEL,
+    ):
         self.path = Path(path)
         self.row_shape, self.dtype = tuple(int(x) for x in row_shape), np.dtype(dtype)
         self.chunk_rows = int(chunk_rows)
@@ -66,7 +72,7 @@ class ChunkWriter:
         if rows.shape[1:] != self.row_shape:
             raise ValueError(f"rows of shape {rows.shape[1:]} appended to an array of rows {self.row_shape}")
         for s in range(0, len(rows), self.chunk_rows):
-            part = rows[s: s + self.chunk_rows]
+            part = rows[s : s + self.chunk_rows]
             self._f.write(self._cctx.compress(part.tobytes()))
             self._n += len(part)
             self._rows.append(self._n)
@@ -79,8 +85,16 @@ class ChunkWriter:
         """Write the index and close; returns the array's shape."""
         if self._f.closed:
             return (self._n, *self.row_shape)
-        header = json.dumps({"encoding": ENCODING, "rows": self._n, "row_shape": self.row_shape,
-                             "dtype": self.dtype.str, "chunk_rows": self.chunk_rows}, sort_keys=True).encode()
+        header = json.dumps(
+            {
+                "encoding": ENCODING,
+                "rows": self._n,
+                "row_shape": self.row_shape,
+                "dtype": self.dtype.str,
+                "chunk_rows": self.chunk_rows,
+            },
+            sort_keys=True,
+        ).encode()
         self._f.write(np.asarray(self._rows, "<i8").tobytes())
         self._f.write(np.asarray(self._offsets, "<i8").tobytes())
         self._f.write(header)
@@ -100,14 +114,14 @@ class CompressedArray:
         buf = self._buf
         if len(buf) < len(MAGIC) + _TAIL.size or bytes(buf[: len(MAGIC)]) != MAGIC:
             raise ValueError("not a d5rl chunked array (bad magic)")
-        hlen, n, magic = _TAIL.unpack(bytes(buf[-_TAIL.size:]))
+        hlen, n, magic = _TAIL.unpack(bytes(buf[-_TAIL.size :]))
         end = len(buf) - _TAIL.size
         if magic != MAGIC or end - hlen - 16 * (n + 1) < len(MAGIC):
             raise ValueError("not a d5rl chunked array (bad footer)")
-        head = json.loads(bytes(buf[end - hlen: end]))
+        head = json.loads(bytes(buf[end - hlen : end]))
         if head.get("encoding") != ENCODING:
             raise ValueError(f"unknown chunk encoding {head.get('encoding')!r}")
-        idx = np.frombuffer(bytes(buf[end - hlen - 16 * (n + 1): end - hlen]), "<i8").reshape(2, n + 1)
+        idx = np.frombuffer(bytes(buf[end - hlen - 16 * (n + 1) : end - hlen]), "<i8").reshape(2, n + 1)
         self.row_starts, self.offsets = idx[0].copy(), idx[1].copy()
         self.dtype = np.dtype(head["dtype"])
         self.row_shape = tuple(head["row_shape"])
@@ -126,7 +140,7 @@ class CompressedArray:
     def __len__(self) -> int:
         return self.shape[0]
 
-    def head(self, rows: int) -> "CompressedArray":
+    def head(self, rows: int) -> CompressedArray:
         """The first ``rows`` rows, still compressed (no decoding)."""
         out = CompressedArray.__new__(CompressedArray)
         out.__dict__.update(self.__dict__)
@@ -139,7 +153,7 @@ class CompressedArray:
         """Decoded chunk ``c`` (rows ``row_starts[c]:row_starts[c+1]``), read-only."""
         if self._dctx is None:
             self._dctx = _zstd().ZstdDecompressor()
-        blob = self._buf[self.offsets[c]: self.offsets[c + 1]]
+        blob = self._buf[self.offsets[c] : self.offsets[c + 1]]
         n = int(self.row_starts[c + 1] - self.row_starts[c])
         try:
             raw = self._dctx.decompress(blob)
@@ -195,7 +209,7 @@ def gather_rows(idx, length: int, row_shape: tuple, dtype, bounds: np.ndarray, c
     order = np.argsort(which, kind="stable")
     edges = np.searchsorted(which[order], np.arange(len(bounds)))
     for c in np.flatnonzero(edges[1:] > edges[:-1]):
-        sel = order[edges[c]: edges[c + 1]]
+        sel = order[edges[c] : edges[c + 1]]
         out[sel] = chunk(int(c))[flat[sel] - bounds[c]]
     return out.reshape(idx.shape + tuple(row_shape))
 
@@ -204,19 +218,21 @@ class CorruptChunkError(DatasetCorruptError):
     """A chunk that fails to decode or decodes to the wrong size."""
 
     def __init__(self, message: str):
-        super().__init__(message, "run `d5rl verify` then `d5rl generate TASK`: damaged render-cache shards are "
-                                  "rendered again")
+        super().__init__(
+            message, "run `d5rl verify` then `d5rl generate TASK`: damaged render-cache shards are rendered again"
+        )
 
 
-def compress_array(path: str | os.PathLike, array: np.ndarray, segments: list[int] | None = None,
-                   chunk_rows: int = CHUNK_ROWS) -> tuple[int, ...]:
+def compress_array(
+    path: str | os.PathLike, array: np.ndarray, segments: list[int] | None = None, chunk_rows: int = CHUNK_ROWS
+) -> tuple[int, ...]:
     """Write ``array`` as a ``.zch`` file; chunks restart at each of ``segments`` (row counts,
     e.g. per episode; default: one segment).  Returns the shape."""
     w = ChunkWriter(path, array.shape[1:], array.dtype, chunk_rows)
     try:
         start = 0
         for n in segments if segments is not None else [len(array)]:
-            w.append(np.asarray(array[start: start + n]))
+            w.append(np.asarray(array[start : start + n]))
             start += n
         if start != len(array):
             raise ValueError(f"segments cover {start} of {len(array)} rows")

@@ -11,7 +11,8 @@ of episode ``e`` observes step ``i + e`` and lands in step ``i + e + 1``.
 
 from __future__ import annotations
 
-from typing import Any, Iterator, Mapping
+from collections.abc import Iterator, Mapping
+from typing import Any
 
 import numpy as np
 
@@ -68,13 +69,12 @@ class ChunkedArray:
             c0 = int(np.searchsorted(self.ends, start, side="right"))
             c1 = int(np.searchsorted(self.ends, stop - 1, side="right"))
             if c0 == c1:
-                return self.chunks[c0][start - self.starts[c0]: stop - self.starts[c0]]
-            parts = [self.chunks[c0][start - self.starts[c0]:]]
+                return self.chunks[c0][start - self.starts[c0] : stop - self.starts[c0]]
+            parts = [self.chunks[c0][start - self.starts[c0] :]]
             parts += [self.chunks[c] for c in range(c0 + 1, c1)]
             parts.append(self.chunks[c1][: stop - self.starts[c1]])
             return np.concatenate(parts, axis=0)
         return gather_rows(idx, len(self), self.shape[1:], self.dtype, self.bounds, self.chunks.__getitem__)
-
 
 
 def mc_tail(last_reward: float, gamma: float, terminal: bool) -> float:
@@ -84,6 +84,7 @@ def mc_tail(last_reward: float, gamma: float, terminal: bool) -> float:
     if terminal or gamma >= 1.0:
         return 0.0
     return float(last_reward) / (1.0 - float(gamma))
+
 
 class Dataset:
     """An offline dataset: flat arrays plus episode structure.
@@ -132,7 +133,7 @@ class Dataset:
 
     # --- construction ------------------------------------------------------------------------
     @classmethod
-    def from_episodes(cls, episodes: list[Episode], metadata: dict | None = None, **kwargs) -> "Dataset":
+    def from_episodes(cls, episodes: list[Episode], metadata: dict | None = None, **kwargs) -> Dataset:
         """An in-memory dataset from a list of episodes (tests, toy problems, conversions)."""
         from d5rl.datasets.generation import _concat
 
@@ -156,7 +157,7 @@ class Dataset:
                 out[key] = arr[steps]
         if self.obs_keys == ["observations"]:
             return out["observations"]
-        return {k[len("observations/"):]: v for k, v in out.items()}
+        return {k[len("observations/") :]: v for k, v in out.items()}
 
     def _stacked(self, arr, steps: np.ndarray, k: int, episodes: np.ndarray) -> np.ndarray:
         """Frames ``steps-k+1 .. steps`` (clamped at the episode's first step), stacked on the channel axis."""
@@ -319,7 +320,7 @@ class Dataset:
         s0 = t0 + i
         arrays = {}
         for key, arr in self.arrays.items():
-            arrays[key] = np.asarray(arr[s0: s0 + n + 1] if self.aligns[key] == "step" else arr[t0: t0 + n])
+            arrays[key] = np.asarray(arr[s0 : s0 + n + 1] if self.aligns[key] == "step" else arr[t0 : t0 + n])
         return Episode(arrays, dict(self.episode_meta[i]))
 
     def episodes(self) -> Iterator[Episode]:

@@ -88,34 +88,42 @@ def _episode_infos(arrays: dict[str, np.ndarray]) -> dict[str, np.ndarray]:
             v = np.asarray(v)
             if len(v) == n_obs - 1:
                 v = np.concatenate([np.zeros((1,) + v.shape[1:], v.dtype), v])
-            out[minari_key(key[len("infos/"):])] = v
+            out[minari_key(key[len("infos/") :])] = v
     return out
 
 
 def _check(name: str, values: np.ndarray, space: gym.spaces.Box, what: str) -> None:
     if values.shape[1:] != space.shape or values.dtype != space.dtype:
-        raise D5RLError(f"{what}: the dataset's {name} are {values.dtype}{values.shape[1:]}, the environment's "
-                        f"space is {space.dtype}{space.shape}",
-                        "export the dataset at the environment's image size (the render cache's default)")
+        raise D5RLError(
+            f"{what}: the dataset's {name} are {values.dtype}{values.shape[1:]}, the environment's "
+            f"space is {space.dtype}{space.shape}",
+            "export the dataset at the environment's image size (the render cache's default)",
+        )
     if np.issubdtype(values.dtype, np.floating) and not np.isfinite(values).all():
         raise D5RLError(f"{what}: the dataset's {name} hold NaN or infinite values", "run `d5rl verify` on it")
     if np.isfinite(space.low).all() and np.isfinite(space.high).all():
         if (values < space.low).any() or (values > space.high).any():
-            raise D5RLError(f"{what}: the dataset's {name} leave the environment's bounds "
-                            f"[{space.low.min()}, {space.high.max()}]", "report this to the d5rl maintainers")
+            raise D5RLError(
+                f"{what}: the dataset's {name} leave the environment's bounds [{space.low.min()}, {space.high.max()}]",
+                "report this to the d5rl maintainers",
+            )
 
 
-def export_minari(task: str, *, dataset_id: str | None = None, seed: int | None = None,
-                  episodes: int | None = None, progress: bool = True) -> Path:
+def export_minari(
+    task: str,
+    *,
+    dataset_id: str | None = None,
+    seed: int | None = None,
+    episodes: int | None = None,
+    progress: bool = True,
+) -> Path:
     try:
         import minari
         from minari.data_collector import EpisodeBuffer
     except ImportError as e:
-        raise MissingDependencyError("Minari export needs the `minari` package",
-                                     "pip install 'd5rl[export]'") from e
-    from d5rl.progress import progress_bar
-
+        raise MissingDependencyError("Minari export needs the `minari` package", "pip install 'd5rl[export]'") from e
     from d5rl.datasets.loading import load_dataset
+    from d5rl.progress import progress_bar
 
     spec = get_spec(task)
     tid = parse_task_id(spec.id)
@@ -126,17 +134,25 @@ def export_minari(task: str, *, dataset_id: str | None = None, seed: int | None 
     env.close()
     ds = load_dataset(spec, seed=seed, episodes=episodes, generate=False, progress=False)
     buffers = []
-    for i, ep in enumerate(progress_bar(ds.episodes(), total=ds.num_episodes, unit="ep", desc="export",
-                                disable=not progress)):
+    for i, ep in enumerate(
+        progress_bar(ds.episodes(), total=ds.num_episodes, unit="ep", desc="export", disable=not progress)
+    ):
         a = ep.arrays
         obs = _episode_obs(a, obs_space)
-        for k, v in (obs.items() if isinstance(obs, dict) else [("observations", obs)]):
+        for k, v in obs.items() if isinstance(obs, dict) else [("observations", obs)]:
             _check(f"observations {k!r}", v, obs_space[k] if isinstance(obs, dict) else obs_space, f"episode {i}")
         _check("actions", a["actions"], act_space, f"episode {i}")
-        buffers.append(EpisodeBuffer(
-            id=i, observations=obs, actions=a["actions"], rewards=a["rewards"].astype(np.float64),
-            terminations=a["terminals"], truncations=a["timeouts"], infos=_episode_infos(a) or None,
-        ))
+        buffers.append(
+            EpisodeBuffer(
+                id=i,
+                observations=obs,
+                actions=a["actions"],
+                rewards=a["rewards"].astype(np.float64),
+                terminations=a["terminals"],
+                truncations=a["timeouts"],
+                infos=_episode_infos(a) or None,
+            )
+        )
     try:
         with warnings.catch_warnings():  # d5rl has no contact address to give; everything else is filled in
             warnings.filterwarnings("ignore", message="`author_email` is set to None", category=UserWarning)
@@ -153,11 +169,12 @@ def export_minari(task: str, *, dataset_id: str | None = None, seed: int | None 
                 ref_min_score=None if spec.score is None else spec.score.random,
                 ref_max_score=None if spec.score is None else spec.score.expert,
                 description=f"{spec.id}: {spec.description} (d5rl dataset {ds.metadata.get('dataset')} "
-                            f"v{ds.metadata.get('dataset_version')}, seed {ds.metadata.get('seed')}; Dict keys use "
-                            f"'{SEP}' for '/')",
+                f"v{ds.metadata.get('dataset_version')}, seed {ds.metadata.get('seed')}; Dict keys use "
+                f"'{SEP}' for '/')",
                 jpeg_encoding=False,
             )
     except ValueError as e:
-        raise D5RLError(f"Minari refused the export: {e}",
-                        "pass another --dataset-id, or delete the existing Minari dataset") from e
+        raise D5RLError(
+            f"Minari refused the export: {e}", "pass another --dataset-id, or delete the existing Minari dataset"
+        ) from e
     return Path(md.spec.data_path).parent

@@ -41,14 +41,15 @@ import os
 import re
 import shutil
 import socket
+from collections.abc import Iterable
 from pathlib import Path
-from typing import Any, Iterable
+from typing import Any
 
 import numpy as np
 
 from d5rl.datasets import chunks, lock
-from d5rl.files import JSON_MAX_BYTES, dump_json, json_type_error, owner_tag, read_json, write_atomic
 from d5rl.errors import D5RLError, DatasetCorruptError, DatasetVersionError, is_int
+from d5rl.files import dump_json, json_type_error, owner_tag, read_json, write_atomic
 
 FORMAT_VERSION = 1
 MANIFEST = "manifest.json"
@@ -131,8 +132,12 @@ def _arrays_problem(arrays: Any, stored: bool, where: str) -> tuple[str, Any, st
 
 
 def _range_problem(episodes: Any, where: str) -> tuple[str, Any, str] | None:
-    if not (isinstance(episodes, list) and len(episodes) == 2 and all(is_int(n, lo=0) for n in episodes)
-            and episodes[0] < episodes[1]):
+    if not (
+        isinstance(episodes, list)
+        and len(episodes) == 2
+        and all(is_int(n, lo=0) for n in episodes)
+        and episodes[0] < episodes[1]
+    ):
         return where, episodes, "[first, end) episode numbers"
     return None
 
@@ -151,7 +156,8 @@ def _manifest_problem(m: dict) -> tuple[str, Any, str] | None:
         if not isinstance(e, dict) or not isinstance(e.get("name"), str) or not re.fullmatch(r"shard-\d+", e["name"]):
             return f"shards[{i}]", e, "an object with the shard's name"
         problem = _range_problem(e.get("episodes"), f"shards[{i}].episodes") or _arrays_problem(
-            e.get("arrays"), True, f"shards[{i}].arrays")
+            e.get("arrays"), True, f"shards[{i}].arrays"
+        )
         if problem is not None:
             return problem
     if shards[-1]["episodes"][1] < m["num_episodes"]:
@@ -178,16 +184,16 @@ def read_manifest(path: Path) -> dict:
     read, :class:`DatasetCorruptError` (repaired by ``d5rl generate``) for anything else wrong."""
     manifest = load_json(path, "manifest")
     if not isinstance(manifest, dict):
-        raise json_type_error("manifest", path, "the file", manifest, "a JSON object", DatasetCorruptError,
-                              _regen_hint(path))
+        raise json_type_error(
+            "manifest", path, "the file", manifest, "a JSON object", DatasetCorruptError, _regen_hint(path)
+        )
     found = manifest.get("format_version")
     if is_int(found) and found != FORMAT_VERSION:
         raise DatasetVersionError(
             f"{path} has format version {found!r}, this d5rl reads version {FORMAT_VERSION}",
             "use the d5rl version that wrote it, or regenerate: `d5rl generate TASK --force`",
         )
-    problem = (("format_version", found, str(FORMAT_VERSION)) if found != FORMAT_VERSION
-               else _manifest_problem(manifest))
+    problem = ("format_version", found, str(FORMAT_VERSION)) if found != FORMAT_VERSION else _manifest_problem(manifest)
     if problem is not None:
         raise json_type_error("manifest", path, *problem, DatasetCorruptError, _regen_hint(path))
     return manifest
@@ -225,9 +231,12 @@ def disk_full_error(path: Path, exc: OSError, hint: str | None = None) -> D5RLEr
         free = None
     if code == errno.ENOSPC or (free is not None and free < 64 << 20):
         where = f" ({free / 2**20:.0f} MiB free)" if free is not None else ""
-        return D5RLError(f"the disk holding {path} is full{where}",
-                         hint or "free some space or point D5RL_HOME at a bigger disk, then run the same command "
-                         "again (finished shards are kept)")
+        return D5RLError(
+            f"the disk holding {path} is full{where}",
+            hint
+            or "free some space or point D5RL_HOME at a bigger disk, then run the same command "
+            "again (finished shards are kept)",
+        )
     return None
 
 
@@ -239,8 +248,10 @@ def ensure_writable(path: Path) -> None:
         probe.touch()
         probe.unlink()
     except OSError as e:
-        raise D5RLError(f"cannot write to {path} ({e.strerror or e})",
-                        "set D5RL_HOME to a writable directory (datasets go to $D5RL_HOME/datasets)") from None
+        raise D5RLError(
+            f"cannot write to {path} ({e.strerror or e})",
+            "set D5RL_HOME to a writable directory (datasets go to $D5RL_HOME/datasets)",
+        ) from None
 
 
 class ShardWriter:
@@ -346,15 +357,19 @@ def read_shard_record(shard_dir: Path) -> dict:
     path = shard_dir / SHARD_META
     record = load_json(path, "shard record")
     if not isinstance(record, dict):
-        raise json_type_error("shard record", path, "the file", record, "a JSON object", DatasetCorruptError,
-                              _regen_hint(path))
+        raise json_type_error(
+            "shard record", path, "the file", record, "a JSON object", DatasetCorruptError, _regen_hint(path)
+        )
     if is_int(record.get("format_version")) and record["format_version"] != FORMAT_VERSION:
         raise DatasetVersionError(
             f"{shard_dir} has format version {record.get('format_version')}, this d5rl reads {FORMAT_VERSION}",
             f"regenerate it: `d5rl generate TASK --force` (or delete {shard_dir.parent.parent})",
         )
-    problem = (("format_version", record.get("format_version"), str(FORMAT_VERSION))
-               if record.get("format_version") != FORMAT_VERSION else _record_problem(record))
+    problem = (
+        ("format_version", record.get("format_version"), str(FORMAT_VERSION))
+        if record.get("format_version") != FORMAT_VERSION
+        else _record_problem(record)
+    )
     if problem is not None:
         raise json_type_error("shard record", path, *problem, DatasetCorruptError, _regen_hint(path))
     return record
@@ -367,8 +382,10 @@ def open_array(shard_dir: Path, info: dict, mmap: bool = True) -> np.ndarray | c
     path = shard_dir / info["file"]
     encoding = info.get("encoding")
     if encoding not in (None, chunks.ENCODING):
-        raise DatasetVersionError(f"{path} is stored as {encoding!r}, which this d5rl does not read",
-                                  "use the d5rl version that wrote it, or regenerate: `d5rl generate TASK --force`")
+        raise DatasetVersionError(
+            f"{path} is stored as {encoding!r}, which this d5rl does not read",
+            "use the d5rl version that wrote it, or regenerate: `d5rl generate TASK --force`",
+        )
     try:
         if encoding is None:
             arr = np.load(path, mmap_mode="r" if mmap else None, allow_pickle=False)
@@ -472,5 +489,9 @@ def package_versions() -> dict[str, str]:
 
     import d5rl
 
-    return {"d5rl": d5rl.__version__, "mujoco": mujoco.__version__, "numpy": np.__version__,
-            "gymnasium": gymnasium.__version__}
+    return {
+        "d5rl": d5rl.__version__,
+        "mujoco": mujoco.__version__,
+        "numpy": np.__version__,
+        "gymnasium": gymnasium.__version__,
+    }

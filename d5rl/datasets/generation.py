@@ -18,7 +18,6 @@ import time
 from pathlib import Path
 
 import numpy as np
-from d5rl.progress import progress_bar
 
 from d5rl import numerics, parallel, paths
 from d5rl.datasets import format as fmt
@@ -26,6 +25,7 @@ from d5rl.datasets import lock
 from d5rl.datasets.episode import Episode
 from d5rl.errors import D5RLError, DatasetCorruptError, DatasetVersionError, is_int
 from d5rl.files import dump_json, json_default
+from d5rl.progress import progress_bar
 from d5rl.registry import DatasetSpec, TaskSpec, get_spec, resolve
 
 MAX_SEED = 2**63 - 1
@@ -61,15 +61,18 @@ def not_imported_error(spec: TaskSpec, dspec: DatasetSpec) -> D5RLError:
     from d5rl.errors import DatasetNotFoundError
 
     how = resolve(dspec.importer).how
-    return DatasetNotFoundError(f"{spec.id} trains on imported data ({dspec.name}), which is not in "
-                                f"{dataset_root(dspec)}", how)
+    return DatasetNotFoundError(
+        f"{spec.id} trains on imported data ({dspec.name}), which is not in {dataset_root(dspec)}", how
+    )
 
 
 def check_seed(seed) -> int:
     """A dataset seed, checked before any work: an integer in [0, 2**63)."""
     if not is_int(seed, lo=0, hi=MAX_SEED):
-        raise D5RLError(f"dataset seed must be an integer in [0, 2**63), got {seed!r}",
-                        "omit --seed (seed= in Python) to use the task's default seed (0)")
+        raise D5RLError(
+            f"dataset seed must be an integer in [0, 2**63), got {seed!r}",
+            "omit --seed (seed= in Python) to use the task's default seed (0)",
+        )
     return int(seed)
 
 
@@ -78,9 +81,10 @@ def check_episodes(episodes, dspec: DatasetSpec) -> int:
     if episodes is None:
         return dspec.num_episodes
     if not is_int(episodes, lo=1, hi=dspec.num_episodes):
-        raise D5RLError(f"{dspec.name} has {dspec.num_episodes} episodes; {episodes!r} were asked for",
-                        f"ask for 1 to {dspec.num_episodes} episodes "
-                        "(omit --episodes, or episodes= in Python, for all of them)")
+        raise D5RLError(
+            f"{dspec.name} has {dspec.num_episodes} episodes; {episodes!r} were asked for",
+            f"ask for 1 to {dspec.num_episodes} episodes (omit --episodes, or episodes= in Python, for all of them)",
+        )
     return int(episodes)
 
 
@@ -228,11 +232,15 @@ def stale_data(task: str, recorded: dict | None) -> str | None:
     if not diffs:
         return None
     if diffs == ["generator_inputs"]:
-        return (f"trained on {recorded.get('dataset')} made from other generator inputs than the published "
-                f"ones ({', '.join(sorted(now['generator_inputs']))})")
-    return (f"trained on {recorded.get('dataset')} v{recorded.get('dataset_version')} "
-            f"(generator {recorded.get('generator_version')}); the task's data is now "
-            f"{now['dataset']} v{now['dataset_version']} (generator {now['generator_version']})")
+        return (
+            f"trained on {recorded.get('dataset')} made from other generator inputs than the published "
+            f"ones ({', '.join(sorted(now['generator_inputs']))})"
+        )
+    return (
+        f"trained on {recorded.get('dataset')} v{recorded.get('dataset_version')} "
+        f"(generator {recorded.get('generator_version')}); the task's data is now "
+        f"{now['dataset']} v{now['dataset_version']} (generator {now['generator_version']})"
+    )
 
 
 # --- driver side -------------------------------------------------------------------------------------
@@ -329,8 +337,12 @@ def _generate_locked(spec, dspec, seed, num_episodes, root, workers, force, prog
                 entry = listed.get(shard_dir.name)
                 if rec["episodes"] == [start, stop]:
                     problems = fmt.check_shard(shard_dir, rec)
-                    if not problems and entry is not None and entry["episodes"] == rec["episodes"] \
-                            and entry["arrays"] != rec["arrays"]:
+                    if (
+                        not problems
+                        and entry is not None
+                        and entry["episodes"] == rec["episodes"]
+                        and entry["arrays"] != rec["arrays"]
+                    ):
                         # The shard's record and the manifest disagree and either may be the damaged one:
                         # generation is deterministic, so the regenerated shard settles it.
                         problems = [f"{fmt.SHARD_META} disagrees with {fmt.MANIFEST}"]
@@ -346,17 +358,26 @@ def _generate_locked(spec, dspec, seed, num_episodes, root, workers, force, prog
     # Shards beyond the plan belong to a larger earlier request; they stay valid and are kept.
     if not pending and have == target:
         if manifest_content(manifest) == manifest_content(
-                build_manifest(dspec, ident, [records[i] for i in range(len(plan))], target)):
+            build_manifest(dspec, ident, [records[i] for i in range(len(plan))], target)
+        ):
             return root
         repairs.append(f"{fmt.MANIFEST} (disagrees with the shards)")
     if repairs:
-        print(f"repairing {len(repairs)} damaged or missing part(s) of {dspec.name}: {', '.join(repairs[:5])}"
-              + (" ..." if len(repairs) > 5 else ""), file=sys.stderr, flush=True)
+        print(
+            f"repairing {len(repairs)} damaged or missing part(s) of {dspec.name}: {', '.join(repairs[:5])}"
+            + (" ..." if len(repairs) > 5 else ""),
+            file=sys.stderr,
+            flush=True,
+        )
 
     done_eps = sum(stop - start for i, (start, stop) in enumerate(plan) if i in records)
     bar = progress_bar(
-        total=target, initial=done_eps, unit="ep", desc=f"generate {dspec.name}",
-        disable=not progress, dynamic_ncols=True,
+        total=target,
+        initial=done_eps,
+        unit="ep",
+        desc=f"generate {dspec.name}",
+        disable=not progress,
+        dynamic_ncols=True,
     )
     t0, transitions = time.perf_counter(), 0
 
@@ -370,13 +391,22 @@ def _generate_locked(spec, dspec, seed, num_episodes, root, workers, force, prog
         records[pending[i][0]] = record
 
     if dspec.numerics == "portable" and not numerics.supported():
-        print(f"warning: {dspec.name} is defined with portable numerics, which this platform does not have; "
-              "its bytes may differ from the reference's", file=sys.stderr, flush=True)
+        print(
+            f"warning: {dspec.name} is defined with portable numerics, which this platform does not have; "
+            "its bytes may differ from the reference's",
+            file=sys.stderr,
+            flush=True,
+        )
     try:
         parallel.run_jobs(
-            _run_shard, [(str(shards_dir), index, start, stop, ident) for index, start, stop in pending],
-            workers=workers, initializer=_init_worker, initargs=(spec,),
-            on_message=on_message, on_result=on_result, shared_dir=shards_dir,
+            _run_shard,
+            [(str(shards_dir), index, start, stop, ident) for index, start, stop in pending],
+            workers=workers,
+            initializer=_init_worker,
+            initargs=(spec,),
+            on_message=on_message,
+            on_result=on_result,
+            shared_dir=shards_dir,
             worker_env=numerics.worker_env(dspec.numerics),
         )
     finally:
@@ -409,8 +439,9 @@ def manifest_content(manifest: dict | None) -> dict | None:
     return None if manifest is None else {k: v for k, v in manifest.items() if k != "packages"}
 
 
-def build_manifest(dspec: DatasetSpec, ident: dict, records: list[dict], num_episodes: int,
-                   extra: dict | None = None) -> dict:
+def build_manifest(
+    dspec: DatasetSpec, ident: dict, records: list[dict], num_episodes: int, extra: dict | None = None
+) -> dict:
     """The manifest of finished shards; ``extra``: more keys (an importer's source and replay check)."""
     lengths = [n for r in records for n in r["episode_lengths"]]
     arrays = {}
@@ -432,8 +463,9 @@ def build_manifest(dspec: DatasetSpec, ident: dict, records: list[dict], num_epi
     return _json_normal(manifest)
 
 
-def write_manifest(root: Path, dspec: DatasetSpec, ident: dict, records: list[dict], num_episodes: int,
-                   extra: dict | None = None) -> dict:
+def write_manifest(
+    root: Path, dspec: DatasetSpec, ident: dict, records: list[dict], num_episodes: int, extra: dict | None = None
+) -> dict:
     """Publish the manifest of finished shards (see :func:`build_manifest`)."""
     manifest = build_manifest(dspec, ident, records, num_episodes, extra)
     with lock.publishing(root):  # replaces the old manifest (if extending) in one step

@@ -5,7 +5,6 @@
 from __future__ import annotations
 
 import contextlib
-
 import sys
 import warnings
 from pathlib import Path
@@ -45,8 +44,10 @@ def _extends(rec: dict, entry: dict, manifest: dict) -> bool:
     """Whether ``rec`` is the manifest's last, partial shard already rewritten by a generator that is
     extending the dataset: same generator and seed, same first episode, more episodes.  Generation is
     deterministic, so the episodes the manifest promises are the same bytes in it."""
-    same = all(rec.get(k) == manifest.get(k) for k in
-               ("dataset", "dataset_version", "generator", "generator_version", "generator_kwargs", "seed"))
+    same = all(
+        rec.get(k) == manifest.get(k)
+        for k in ("dataset", "dataset_version", "generator", "generator_version", "generator_kwargs", "seed")
+    )
     return same and rec["episodes"][0] == entry["episodes"][0] and rec["episodes"][1] > entry["episodes"][1]
 
 
@@ -105,8 +106,20 @@ def load_dataset(
             wanted = min(wanted, _manifest(root / fmt.MANIFEST, spec, dspec)["num_episodes"]) or wanted  # what is there
     for attempt in range(3):
         try:
-            return _open(spec, dspec, seed, root, wanted, episodes is not None, in_memory, limit, obs_keys,
-                         workers, progress, derived_kwargs)
+            return _open(
+                spec,
+                dspec,
+                seed,
+                root,
+                wanted,
+                episodes is not None,
+                in_memory,
+                limit,
+                obs_keys,
+                workers,
+                progress,
+                derived_kwargs,
+            )
         except _NotReady as e:
             if not generate or attempt == 2 or dspec.imported:
                 raise e.error from None
@@ -124,8 +137,9 @@ def _imported_spec(spec: TaskSpec, dspec, seed):
     from d5rl.datasets import generation
 
     if seed is not None and seed != dspec.default_seed:
-        raise DatasetArgumentError(f"{spec.id}'s dataset is imported and has no seed; {seed!r} was given",
-                                   "omit seed= (--seed)")
+        raise DatasetArgumentError(
+            f"{spec.id}'s dataset is imported and has no seed; {seed!r} was given", "omit seed= (--seed)"
+        )
     path = generation.dataset_root(dspec) / fmt.MANIFEST
     if not path.exists():
         raise generation.not_imported_error(spec, dspec)
@@ -143,15 +157,18 @@ def _check_derived_kwargs(spec: TaskSpec, dspec, kwargs: dict) -> None:
     own = [name for name, p in inspect.signature(load_dataset).parameters.items() if p.kind is p.KEYWORD_ONLY]
     builder = None if dspec.derived is None else resolve(dspec.derived)
     params = {} if builder is None else inspect.signature(builder).parameters
-    takes = [name for name, p in params.items()
-             if p.kind is p.KEYWORD_ONLY and name not in ("episodes", "workers", "progress", "check")]
+    takes = [
+        name
+        for name, p in params.items()
+        if p.kind is p.KEYWORD_ONLY and name not in ("episodes", "workers", "progress", "check")
+    ]
     unknown = sorted(set(kwargs) - set(takes))
     if unknown:
         near = [m for u in unknown for m in difflib.get_close_matches(u, takes + own, n=1)]
         raise DatasetArgumentError(
             f"{spec.id}'s dataset takes no argument {', '.join(map(repr, unknown))}",
-            (f"did you mean {', '.join(map(repr, near))}? " if near else "")
-            + f"it takes {', '.join(own + takes)}")
+            (f"did you mean {', '.join(map(repr, near))}? " if near else "") + f"it takes {', '.join(own + takes)}",
+        )
     if "check" in params:  # a builder that can check its values without work (d5rl's own do)
         builder(spec, None, None, episodes=0, check=True, **kwargs)
 
@@ -177,13 +194,23 @@ def _open(spec, dspec, seed, root, wanted, partial, in_memory, limit, obs_keys, 
     if have < wanted and dspec.imported:
         raise _NotReady(generation.not_imported_error(spec, dspec))
     if have < wanted:
-        raise _NotReady(DatasetNotFoundError(
-            f"dataset {dspec.name} (seed {seed}) has {have} of the {wanted} episodes asked for in {root}",
-            f"run `d5rl generate {spec.id}" + (f" --episodes {wanted}`" if partial else "`")))
+        raise _NotReady(
+            DatasetNotFoundError(
+                f"dataset {dspec.name} (seed {seed}) has {have} of the {wanted} episodes asked for in {root}",
+                f"run `d5rl generate {spec.id}" + (f" --episodes {wanted}`" if partial else "`"),
+            )
+        )
     n = wanted
     if dspec.derived is not None:  # build missing caches first (may write; takes the write lock)
-        extra_roots = resolve(dspec.derived)(spec, root, _manifest(manifest_path, spec, dspec), episodes=n,
-                                             workers=workers, progress=progress, **derived_kwargs)
+        extra_roots = resolve(dspec.derived)(
+            spec,
+            root,
+            _manifest(manifest_path, spec, dspec),
+            episodes=n,
+            workers=workers,
+            progress=progress,
+            **derived_kwargs,
+        )
     else:
         extra_roots = []
     with lock.reading(root):  # the manifest and the shards below belong together
@@ -222,12 +249,14 @@ def _open(spec, dspec, seed, root, wanted, partial, in_memory, limit, obs_keys, 
                 try:
                     ex = fmt.read_shard_record(d)
                 except (FileNotFoundError, DatasetCorruptError):
-                    raise _NotReady(DatasetCorruptError(f"cache shard {d} is missing or unreadable", repair),
-                                    True) from None
+                    raise _NotReady(
+                        DatasetCorruptError(f"cache shard {d} is missing or unreadable", repair), True
+                    ) from None
                 problems = fmt.check_shard(d, ex)
                 if problems or ex.get("source_states_sha256") != rec["arrays"]["states"]["sha256"]:
-                    raise _NotReady(DatasetCorruptError(
-                        f"damaged cache shard: {problems[0] if problems else d}", repair), True)
+                    raise _NotReady(
+                        DatasetCorruptError(f"damaged cache shard: {problems[0] if problems else d}", repair), True
+                    )
                 extra_records.append(ex)
             c, a = _shard_chunks(extra_dirs, extra_records, n_last)
             chunks.update(c)

@@ -21,8 +21,8 @@ import contextlib
 import os
 import sys
 import threading
+from collections.abc import Iterator
 from pathlib import Path
-from typing import Iterator
 
 try:
     import fcntl
@@ -94,9 +94,11 @@ def _refuse_waiting_on_parent(root: Path) -> None:
         if holder == os.getppid() and getattr(mp.current_process(), "_inheriting", False):
             from d5rl.errors import D5RLError
 
-            err = D5RLError("a d5rl worker process re-ran the main script, which calls d5rl at top level",
-                            'put the script\'s code under `if __name__ == "__main__":` (worker processes import '
-                            "the main script), or pass workers=1")
+            err = D5RLError(
+                "a d5rl worker process re-ran the main script, which calls d5rl at top level",
+                'put the script\'s code under `if __name__ == "__main__":` (worker processes import '
+                "the main script), or pass workers=1",
+            )
             # One line, not a traceback of the main script's import; the parent reports the exit.
             print(f"d5rl: error: {err}", file=sys.stderr, flush=True)
             raise SystemExit(1)

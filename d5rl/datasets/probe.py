@@ -30,12 +30,15 @@ class NearestNeighbourPolicy:
         except ImportError as e:  # pragma: no cover - scipy comes with jax
             raise D5RLError("the nearest-neighbour probe needs scipy", "pip install 'd5rl[train]'") from e
         if isinstance(observations, dict) or np.ndim(observations) != 2:
-            raise D5RLError(f"the probe needs flat state observations, got shape {np.shape(observations)}",
-                            "use a task's -state twin (e.g. kitchen-standard-mixed-state-v0)")
+            raise D5RLError(
+                f"the probe needs flat state observations, got shape {np.shape(observations)}",
+                "use a task's -state twin (e.g. kitchen-standard-mixed-state-v0)",
+            )
         observations = np.asarray(observations, np.float64)
         if not 1 <= int(k) <= len(observations):
-            raise D5RLError(f"k={k} is not between 1 and the {len(observations)} dataset observations",
-                            "pass a smaller --k")
+            raise D5RLError(
+                f"k={k} is not between 1 and the {len(observations)} dataset observations", "pass a smaller --k"
+            )
         self.k = int(k)
         self.mean = observations.mean(0)
         self.std = observations.std(0) + 1e-6
@@ -71,8 +74,10 @@ def main(argv=None) -> None:
     args = p.parse_args(argv)
     r = probe(args.task, args.episodes, args.k, args.seed)
     score = f"score {r['score']:.3f} ± {r['score_std']:.3f}, " if "score" in r else ""
-    print(f"{args.task}: {args.k}-nearest-neighbour policy over {r['episodes']} episodes: {score}"
-          f"return {r['return']:.1f} ± {r['return_std']:.1f}")
+    print(
+        f"{args.task}: {args.k}-nearest-neighbour policy over {r['episodes']} episodes: {score}"
+        f"return {r['return']:.1f} ± {r['return_std']:.1f}"
+    )
     for k, v in r.get("stats", {}).items():
         print(f"  {k}: {v:.2f}")
 

@@ -70,9 +70,15 @@ def make_entry(root: Path, num_shards: int | None, machine: str) -> dict:
     for entry in entries:
         shard_dir = root / "shards" / entry["name"]
         record = fmt.read_shard_record(shard_dir)
-        shards.append({"name": entry["name"], "episodes": entry["episodes"],
-                       "arrays": {k: fmt.sha256_file(shard_dir / info["file"])
-                                  for k, info in sorted(record["arrays"].items())}})
+        shards.append(
+            {
+                "name": entry["name"],
+                "episodes": entry["episodes"],
+                "arrays": {
+                    k: fmt.sha256_file(shard_dir / info["file"]) for k, info in sorted(record["arrays"].items())
+                },
+            }
+        )
         for key, digests in episode_digests(shard_dir, record).items():
             episodes.setdefault(key, []).extend(digests)
     return {
@@ -100,11 +106,16 @@ def compare(root: Path, ref: dict) -> Comparison:
     mine = {k: manifest.get(k) for k in ("dataset_version", "generator_version", "seed")}
     theirs = {k: ref.get(k) for k in mine}
     if mine != theirs:
-        return Comparison(False, f"the reference of {name} is of {theirs}; this dataset is {mine}: "
-                                 "they describe different data (regenerate the reference: "
-                                 f"`python -m d5rl.datasets.references {name}`)")
-    where = (f"reference: {ref['numerics']} numerics, made on {ref['machine']}; "
-             f"this copy: {manifest.get('numerics', 'native')} numerics")
+        return Comparison(
+            False,
+            f"the reference of {name} is of {theirs}; this dataset is {mine}: "
+            "they describe different data (regenerate the reference: "
+            f"`python -m d5rl.datasets.references {name}`)",
+        )
+    where = (
+        f"reference: {ref['numerics']} numerics, made on {ref['machine']}; "
+        f"this copy: {manifest.get('numerics', 'native')} numerics"
+    )
     whole = {s["name"]: s for s in ref["shards"]}
     n = min(manifest["num_episodes"], ref["num_episodes"])
     for shard in manifest["shards"]:
@@ -117,18 +128,24 @@ def compare(root: Path, ref: dict) -> Comparison:
         shard_dir = root / "shards" / shard["name"]
         digests = episode_digests(shard_dir, fmt.read_shard_record(shard_dir))
         if sorted(digests) != sorted(ref["episodes"]):
-            return Comparison(False, f"{name} has arrays {sorted(digests)}, the reference {sorted(ref['episodes'])} "
-                                     f"({where})")
+            return Comparison(
+                False, f"{name} has arrays {sorted(digests)}, the reference {sorted(ref['episodes'])} ({where})"
+            )
         for i in range(a, min(b, n)):
             for key in sorted(digests):
                 if digests[key][i - a] != ref["episodes"][key][i]:
-                    return Comparison(False, f"differs from the reference: first in array '{key}', episode {i} "
-                                             f"(in {shard['name']}) ({where})")
-    more = (f"; the reference covers {ref['num_episodes']}: generate them to compare all"
-            if n < ref["num_episodes"] else "")
+                    return Comparison(
+                        False,
+                        f"differs from the reference: first in array '{key}', episode {i} "
+                        f"(in {shard['name']}) ({where})",
+                    )
+    more = (
+        f"; the reference covers {ref['num_episodes']}: generate them to compare all" if n < ref["num_episodes"] else ""
+    )
     first = "the first episode" if n == 1 else f"the first {n} episodes"
-    return Comparison(True, f"identical to the reference: {first} of {name}, "
-                            f"{len(ref['episodes'])} arrays{more} ({where})")
+    return Comparison(
+        True, f"identical to the reference: {first} of {name}, {len(ref['episodes'])} arrays{more} ({where})"
+    )
 
 
 def compare_task(task, seed: int | None = None, references: dict | None = None) -> Comparison:
@@ -138,15 +155,21 @@ def compare_task(task, seed: int | None = None, references: dict | None = None) 
     dspec = dataset_spec(task)
     refs = load_references() if references is None else references
     if dspec.name not in refs:
-        raise D5RLError(f"no reference fingerprint is recorded for {dspec.name}",
-                        f"record one: `python -m d5rl.datasets.references {dspec.name}`")
+        raise D5RLError(
+            f"no reference fingerprint is recorded for {dspec.name}",
+            f"record one: `python -m d5rl.datasets.references {dspec.name}`",
+        )
     if seed is not None and seed != refs[dspec.name]["seed"]:
-        raise D5RLError(f"the reference of {dspec.name} is of seed {refs[dspec.name]['seed']}, not {seed}",
-                        "leave out --seed to check the default-seed dataset")
+        raise D5RLError(
+            f"the reference of {dspec.name} is of seed {refs[dspec.name]['seed']}, not {seed}",
+            "leave out --seed to check the default-seed dataset",
+        )
     root = dataset_root(dspec, seed)
     if not (root / fmt.MANIFEST).exists():
-        raise D5RLError(f"{root} has no finished dataset to compare",
-                        f"generate it first: `d5rl generate {getattr(task, 'id', task)}`")
+        raise D5RLError(
+            f"{root} has no finished dataset to compare",
+            f"generate it first: `d5rl generate {getattr(task, 'id', task)}`",
+        )
     return compare(root, refs[dspec.name])
 
 
@@ -160,8 +183,13 @@ def dataset_tasks() -> dict[str, str]:
     for task in list_tasks():
         spec = get_spec(task)
         d = spec.dataset
-        if d is not None and d.name not in out and spec.entry_point.startswith("d5rl.") \
-                and not d.imported and d.unavailable is None:
+        if (
+            d is not None
+            and d.name not in out
+            and spec.entry_point.startswith("d5rl.")
+            and not d.imported
+            and d.unavailable is None
+        ):
             out[d.name] = task
     return out
 
@@ -185,11 +213,18 @@ def record(names: list[str], path: Path = REFERENCES, workers: int = 1) -> None:
             os.environ["D5RL_HOME"] = home
             try:
                 t0 = time.perf_counter()
-                root = generate(tasks[name], num_episodes=None if whole else dspec.episodes_per_shard,
-                                workers=workers, progress=False)
+                root = generate(
+                    tasks[name],
+                    num_episodes=None if whole else dspec.episodes_per_shard,
+                    workers=workers,
+                    progress=False,
+                )
                 refs[name] = make_entry(root, None if whole else 1, machine)
-                print(f"{name}: {refs[name]['num_episodes']} episodes, {refs[name]['numerics']} numerics, "
-                      f"{time.perf_counter() - t0:.0f} s", flush=True)
+                print(
+                    f"{name}: {refs[name]['num_episodes']} episodes, {refs[name]['numerics']} numerics, "
+                    f"{time.perf_counter() - t0:.0f} s",
+                    flush=True,
+                )
             finally:
                 if old is None:
                     os.environ.pop("D5RL_HOME", None)
@@ -201,8 +236,10 @@ def record(names: list[str], path: Path = REFERENCES, workers: int = 1) -> None:
 def main(argv: list[str] | None = None) -> int:
     import argparse
 
-    ap = argparse.ArgumentParser(prog="python -m d5rl.datasets.references",
-                                 description="regenerate reference fingerprints (first shard; toy family whole)")
+    ap = argparse.ArgumentParser(
+        prog="python -m d5rl.datasets.references",
+        description="regenerate reference fingerprints (first shard; toy family whole)",
+    )
     ap.add_argument("datasets", nargs="*", help="dataset names (default: every registered dataset)")
     ap.add_argument("--workers", type=int, default=1, help="processes (default 1)")
     ap.add_argument("--out", type=Path, default=REFERENCES, help="the references file to update")

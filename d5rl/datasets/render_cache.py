@@ -47,14 +47,23 @@ def check_render_args(cameras, size: int, available: tuple[str, ...] | None = No
     calls this first): ``cameras`` a non-empty list of distinct names from ``available``."""
     from d5rl.errors import DatasetArgumentError, is_int
 
-    if available is not None and (isinstance(cameras, str) or not isinstance(cameras, (list, tuple)) or not cameras
-                                  or len(set(cameras)) != len(cameras) or not set(cameras) <= set(available)):
-        raise DatasetArgumentError(f"cameras must be a list of distinct names from {list(available)}, got {cameras!r}",
-                                   f"pass e.g. cameras={list(available)}")
+    if available is not None and (
+        isinstance(cameras, str)
+        or not isinstance(cameras, (list, tuple))
+        or not cameras
+        or len(set(cameras)) != len(cameras)
+        or not set(cameras) <= set(available)
+    ):
+        raise DatasetArgumentError(
+            f"cameras must be a list of distinct names from {list(available)}, got {cameras!r}",
+            f"pass e.g. cameras={list(available)}",
+        )
     lo, hi = FRAME_SIZES
     if not is_int(size, lo=lo, hi=hi):
-        raise DatasetArgumentError(f"size must be an integer number of pixels from {lo} to {hi}, got {size!r}",
-                                   "pass e.g. size=64 (frames are size x size)")
+        raise DatasetArgumentError(
+            f"size must be an integer number of pixels from {lo} to {hi}, got {size!r}",
+            "pass e.g. size=64 (frames are size x size)",
+        )
     return (None if available is None else tuple(cameras)), int(size)
 
 
@@ -69,7 +78,7 @@ def _shard_state(shard_dir: Path, source_sha: str, fn: str, kwargs: dict) -> str
     d5rl's cache, to compress); ``"stale"``: anything else (to render)."""
     try:
         rec = fmt.read_shard_record(shard_dir)
-    except Exception:
+    except Exception:  # noqa: BLE001 (a record that cannot be read, whatever the reason, means: render again)
         return "stale"
     if rec.get("source_states_sha256") != source_sha or rec.get("render") != {"fn": fn, "kwargs": kwargs}:
         return "stale"
@@ -93,7 +102,7 @@ def compress_shard(cache_shard: str, out_root: str, index: int) -> dict:
                 w = writer.open_chunked(key, tuple(info["shape"][1:]), arr.dtype)
                 start = 0
                 for n in segments:
-                    w.append(np.asarray(arr[start: start + n]))
+                    w.append(np.asarray(arr[start : start + n]))
                     start += n
             else:
                 writer.write(key, np.asarray(arr))
@@ -125,8 +134,11 @@ def render_shard(dataset_shard: str, out_root: str, index: int, fn: str, kwargs:
                 if len(arr) != ep_len + 1:
                     raise ValueError(f"{fn} returned {len(arr)} rows of {key!r} for {ep_len + 1} states")
                 if key not in outs:
-                    outs[key] = (writer.open_chunked(key, arr.shape[1:], arr.dtype) if is_frames(arr.shape, arr.dtype)
-                                 else writer.open(key, (total,) + arr.shape[1:], arr.dtype))
+                    outs[key] = (
+                        writer.open_chunked(key, arr.shape[1:], arr.dtype)
+                        if is_frames(arr.shape, arr.dtype)
+                        else writer.open(key, (total,) + arr.shape[1:], arr.dtype)
+                    )
                 if isinstance(outs[key], np.ndarray):
                     outs[key][row : row + ep_len + 1] = arr
                 else:
@@ -150,9 +162,17 @@ def render_shard(dataset_shard: str, out_root: str, index: int, fn: str, kwargs:
         raise
 
 
-def ensure_render_cache(root: str | Path, manifest: dict, fn: str, kwargs: dict[str, Any], *, name: str,
-                        episodes: int | None = None, workers: parallel.Workers = None,
-                        progress: bool = True) -> Path:
+def ensure_render_cache(
+    root: str | Path,
+    manifest: dict,
+    fn: str,
+    kwargs: dict[str, Any],
+    *,
+    name: str,
+    episodes: int | None = None,
+    workers: parallel.Workers = None,
+    progress: bool = True,
+) -> Path:
     """Make sure ``root/renders/<name>`` holds up-to-date frames for the dataset's first ``episodes``
     episodes (whole shards); render what is missing.  Returns the cache directory."""
     root = Path(root)
@@ -166,8 +186,12 @@ def ensure_render_cache(root: str | Path, manifest: dict, fn: str, kwargs: dict[
         fmt.clean_temporaries(out)
         jobs, migrate, todo_eps = _jobs(root, out, manifest, n, fn, kwargs)
         if migrate:
-            print(f"note: {out} holds {len(migrate)} shard(s) of uncompressed frames written by an older d5rl; "
-                  "compressing them in place (lossless, no re-rendering)", file=sys.stderr, flush=True)
+            print(
+                f"note: {out} holds {len(migrate)} shard(s) of uncompressed frames written by an older d5rl; "
+                "compressing them in place (lossless, no re-rendering)",
+                file=sys.stderr,
+                flush=True,
+            )
         bar = None
         if progress and (jobs or migrate):
             from d5rl.progress import progress_bar
@@ -176,8 +200,9 @@ def ensure_render_cache(root: str | Path, manifest: dict, fn: str, kwargs: dict[
         try:
             for func, todo in ((compress_shard, migrate), (render_shard, jobs)):
                 if todo:
-                    parallel.run_jobs(func, todo, workers=workers,
-                                      on_message=bar.update if bar is not None else None, shared_dir=out)
+                    parallel.run_jobs(
+                        func, todo, workers=workers, on_message=bar.update if bar is not None else None, shared_dir=out
+                    )
         except OSError as e:
             full = fmt.disk_full_error(out, e)
             if full is None:

@@ -41,8 +41,13 @@ def verify_dataset(task: str | TaskSpec, seed: int | None = None, progress: bool
     problems: list[str] = []
     manifest_path = root / fmt.MANIFEST
     if not manifest_path.exists():
-        hint = ("generation did not finish" if (root / "shards").exists() else
-                "it was never imported" if spec.dataset.imported else "it was never generated")
+        hint = (
+            "generation did not finish"
+            if (root / "shards").exists()
+            else "it was never imported"
+            if spec.dataset.imported
+            else "it was never generated"
+        )
         return VerifyReport(root, 0, [f"{manifest_path}: missing ({hint}; run `{regenerate_command(spec.id, seed)}`)"])
     try:
         manifest = fmt.read_manifest(manifest_path)
@@ -65,6 +70,8 @@ def verify_dataset(task: str | TaskSpec, seed: int | None = None, progress: bool
     for d, entry in it:
         problems += fmt.verify_shard(d, entry)
     if entries and manifest.get("num_episodes") != entries[-1]["episodes"][1]:
-        problems.append(f"{manifest_path}: num_episodes {manifest.get('num_episodes')} "
-                        f"disagrees with its last shard {entries[-1]['episodes']}")
+        problems.append(
+            f"{manifest_path}: num_episodes {manifest.get('num_episodes')} "
+            f"disagrees with its last shard {entries[-1]['episodes']}"
+        )
     return VerifyReport(root, len(dirs), problems)

@@ -18,9 +18,12 @@ import sys
 # MuJoCo's accepted values (mujoco/rendering/classic/gl_context.py) and the library each backend loads.
 _OFF = ("disable", "disabled", "off", "false", "0")
 _VALID = ("enable", "enabled", "on", "true", "1", "glfw", "") + (
-    ("glx", "egl", "osmesa") if sys.platform.startswith("linux") else ("wgl", "cgl"))
-_LIBRARY = {"egl": ("EGL", ("libEGL.so.1", "libEGL.so")),
-            "osmesa": ("OSMesa", ("libOSMesa.so.8", "libOSMesa.so.6", "libOSMesa.so"))}
+    ("glx", "egl", "osmesa") if sys.platform.startswith("linux") else ("wgl", "cgl")
+)
+_LIBRARY = {
+    "egl": ("EGL", ("libEGL.so.1", "libEGL.so")),
+    "osmesa": ("OSMesa", ("libOSMesa.so.8", "libOSMesa.so.6", "libOSMesa.so")),
+}
 
 
 def _loadable(name: str, files: tuple[str, ...]) -> bool:

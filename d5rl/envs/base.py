@@ -88,12 +88,14 @@ class MujocoEnv(gym.Env):
     def check_action(self, action) -> np.ndarray:
         """``action`` as float64, clipped to ``[-1, 1]``, after checking that it can be applied."""
         if not self._was_reset:
-            raise ResetNeededError(f"{type(self).__name__}.step() was called before reset()",
-                                   "call env.reset(seed=...) first")
+            raise ResetNeededError(
+                f"{type(self).__name__}.step() was called before reset()", "call env.reset(seed=...) first"
+            )
         shape = self.action_space.shape
         if np.iscomplexobj(action):  # numpy would drop the imaginary parts with only a warning
-            raise ActionError(f"action has complex values: {np.asarray(action).tolist()}",
-                              f"pass a real float array of shape {shape}")
+            raise ActionError(
+                f"action has complex values: {np.asarray(action).tolist()}", f"pass a real float array of shape {shape}"
+            )
         try:
             a = np.asarray(action, dtype=np.float64)
         except (TypeError, ValueError):
@@ -102,8 +104,10 @@ class MujocoEnv(gym.Env):
             raise ActionError(f"action must have shape {shape}, got {a.shape}", f"pass a float array of shape {shape}")
         if not np.isfinite(a).all():
             bad = np.flatnonzero(~np.isfinite(a)).tolist()
-            raise ActionError(f"action has NaN or infinite entries at {bad}: {a.tolist()}",
-                              "check the policy's outputs (a diverged network gives NaN); actions must be finite")
+            raise ActionError(
+                f"action has NaN or infinite entries at {bad}: {a.tolist()}",
+                "check the policy's outputs (a diverged network gives NaN); actions must be finite",
+            )
         return np.clip(a, self.action_space.low, self.action_space.high)
 
     # --- physics -----------------------------------------------------------------

@@ -13,5 +13,13 @@ from d5rl.runner.grid import Cell, expand_grid, find_cells
 from d5rl.runner.report import write_report
 from d5rl.runner.stats import iqm, stratified_bootstrap_ci
 
-__all__ = ["BenchResult", "Cell", "expand_grid", "find_cells", "iqm", "run_bench", "stratified_bootstrap_ci",
-           "write_report"]
+__all__ = [
+    "BenchResult",
+    "Cell",
+    "expand_grid",
+    "find_cells",
+    "iqm",
+    "run_bench",
+    "stratified_bootstrap_ci",
+    "write_report",
+]

@@ -20,15 +20,23 @@ import socket
 import subprocess
 import sys
 import time
+from collections.abc import Iterable
 from pathlib import Path
-from typing import Iterable
 
 from d5rl.errors import D5RLError
-from d5rl.parallel import connect_ray
 from d5rl.files import write_atomic
-from d5rl.parallel import configure_worker
-from d5rl.runner.execute import (EXIT_CODES, LOG_FILE, clear_job_outputs, execute_cell, is_done, read_failures,
-                                 record_failure, reset_cell, write_cell_file)
+from d5rl.parallel import configure_worker, connect_ray
+from d5rl.runner.execute import (
+    EXIT_CODES,
+    LOG_FILE,
+    clear_job_outputs,
+    execute_cell,
+    is_done,
+    read_failures,
+    record_failure,
+    reset_cell,
+    write_cell_file,
+)
 from d5rl.runner.grid import DEFAULT_JOB, Cell, GridError, read_cell, same_run, stale_reason
 
 BENCH_FILE = "bench.json"
@@ -46,9 +54,11 @@ class BenchResult:
     wall_s: float = 0.0
 
     def summary(self) -> str:
-        s = (f"{len(self.ok)} finished, {len(self.skipped)} already done, {len(self.failed)} failed"
-             f"{f', {len(self.busy)} running elsewhere' if self.busy else ''}"
-             f"{f', {len(self.stale)} rerun on new data' if self.stale else ''} in {self.wall_s:.1f} s")
+        s = (
+            f"{len(self.ok)} finished, {len(self.skipped)} already done, {len(self.failed)} failed"
+            f"{f', {len(self.busy)} running elsewhere' if self.busy else ''}"
+            f"{f', {len(self.stale)} rerun on new data' if self.stale else ''} in {self.wall_s:.1f} s"
+        )
         for key, err in self.failed.items():
             s += f"\n  FAILED {key}: {err.splitlines()[0] if err else ''}\n    see {self.run_dir / key / 'error.txt'}"
         return s
@@ -83,10 +93,14 @@ def prepare(cells: Iterable[Cell], run_dir: Path | str, argv: list[str] | None =
     if log_path.exists():
         with contextlib.suppress(json.JSONDecodeError):
             launches = json.loads(log_path.read_text())
-    launches.append({
-        "time": time.strftime("%Y-%m-%dT%H:%M:%S%z"), "host": socket.gethostname(),
-        "argv": argv if argv is not None else sys.argv, "cells": [c.key for c in cells],
-    })
+    launches.append(
+        {
+            "time": time.strftime("%Y-%m-%dT%H:%M:%S%z"),
+            "host": socket.gethostname(),
+            "argv": argv if argv is not None else sys.argv,
+            "cells": [c.key for c in cells],
+        }
+    )
     write_atomic(log_path, json.dumps(launches, indent=2) + "\n")
     return cells
 
@@ -126,14 +140,27 @@ def prepare_datasets(cells: Iterable[Cell], workers: int | None = None, progress
 def _progress(total: int, initial: int, enabled: bool):
     from d5rl.progress import progress_bar
 
-    return progress_bar(total=total, initial=initial, unit="cell", desc="bench", disable=not enabled, dynamic_ncols=True)
+    return progress_bar(
+        total=total, initial=initial, unit="cell", desc="bench", disable=not enabled, dynamic_ncols=True
+    )
 
 
-def run_bench(cells: Iterable[Cell], run_dir: Path | str, *, workers: int | None = None,
-              ray_address: str | None = None, use_ray: bool = False, max_attempts: int = 2,
-              progress: bool = True, single_thread: bool = True, nice: int = 0,
-              cpus_per_cell: float = 1.0, gpus_per_cell: float = 0.0, prepare_data: bool = True,
-              argv: list[str] | None = None) -> BenchResult:
+def run_bench(
+    cells: Iterable[Cell],
+    run_dir: Path | str,
+    *,
+    workers: int | None = None,
+    ray_address: str | None = None,
+    use_ray: bool = False,
+    max_attempts: int = 2,
+    progress: bool = True,
+    single_thread: bool = True,
+    nice: int = 0,
+    cpus_per_cell: float = 1.0,
+    gpus_per_cell: float = 0.0,
+    prepare_data: bool = True,
+    argv: list[str] | None = None,
+) -> BenchResult:
     """Run every unfinished cell; see the module docstring.
 
     ``workers=0`` runs cells one after another in this process (for debugging).
@@ -162,13 +189,22 @@ def run_bench(cells: Iterable[Cell], run_dir: Path | str, *, workers: int | None
     bar = _progress(len(cells), len(result.skipped), progress)
     try:
         if use_ray or ray_address:
-            _run_ray(pending, run_dir, result, bar, ray_address, max_attempts, single_thread, nice,
-                     cpus_per_cell, gpus_per_cell)
+            _run_ray(
+                pending,
+                run_dir,
+                result,
+                bar,
+                ray_address,
+                max_attempts,
+                single_thread,
+                nice,
+                cpus_per_cell,
+                gpus_per_cell,
+            )
         elif workers == 0:
             _run_inline(pending, run_dir, result, bar, max_attempts)
         else:
-            _run_local(pending, run_dir, result, bar, workers or default_workers(), max_attempts,
-                       single_thread, nice)
+            _run_local(pending, run_dir, result, bar, workers or default_workers(), max_attempts, single_thread, nice)
     finally:
         bar.close()
     result.wall_s = time.time() - t0
@@ -179,8 +215,9 @@ def _prior_attempts(cdir: Path) -> int:
     return len(read_failures(cdir))
 
 
-def _settle(cell: Cell, status: str, error: str | None, result: BenchResult, bar, queue, tries: dict,
-            max_attempts: int) -> None:
+def _settle(
+    cell: Cell, status: str, error: str | None, result: BenchResult, bar, queue, tries: dict, max_attempts: int
+) -> None:
     """Book one attempt's outcome; requeue a failure while attempts remain."""
     key = cell.key
     result.attempts[key] = tries[key]
@@ -223,8 +260,14 @@ def _log_tail(cdir: Path, n: int = 40) -> str:
 def _start_worker(cell: Cell, cdir: Path, attempt: int, single_thread: bool, nice: int) -> subprocess.Popen:
     """A fresh interpreter per cell (``python -m d5rl.runner.worker``): no inherited JAX/GL state, and no
     re-import of the caller's ``__main__`` (unlike multiprocessing's spawn)."""
-    payload = {"cell": cell.to_json(), "cell_dir": str(cdir), "attempt": attempt, "single_thread": single_thread,
-               "nice": nice, "sys_path": [p for p in sys.path if p]}
+    payload = {
+        "cell": cell.to_json(),
+        "cell_dir": str(cdir),
+        "attempt": attempt,
+        "single_thread": single_thread,
+        "nice": nice,
+        "sys_path": [p for p in sys.path if p],
+    }
     cdir.mkdir(parents=True, exist_ok=True)
     spec = cdir / ".worker.json"
     write_atomic(spec, json.dumps(payload))
@@ -234,8 +277,16 @@ def _start_worker(cell: Cell, cdir: Path, attempt: int, single_thread: bool, nic
     return subprocess.Popen([sys.executable, "-m", "d5rl.runner.worker", str(spec)], env=env, stdin=subprocess.DEVNULL)
 
 
-def _run_local(pending: list[Cell], run_dir: Path, result: BenchResult, bar, workers: int, max_attempts: int,
-               single_thread: bool, nice: int) -> None:
+def _run_local(
+    pending: list[Cell],
+    run_dir: Path,
+    result: BenchResult,
+    bar,
+    workers: int,
+    max_attempts: int,
+    single_thread: bool,
+    nice: int,
+) -> None:
     queue = collections.deque(pending)
     tries: dict[str, int] = collections.Counter()
     running: list[tuple] = []
@@ -285,8 +336,18 @@ def _ray_task(cell_json: dict, cell_dir: str, attempt: int, single_thread: bool,
     return execute_cell(cell_json, cell_dir, attempt)
 
 
-def _run_ray(pending: list[Cell], run_dir: Path, result: BenchResult, bar, address: str | None,
-             max_attempts: int, single_thread: bool, nice: int, cpus: float, gpus: float) -> None:
+def _run_ray(
+    pending: list[Cell],
+    run_dir: Path,
+    result: BenchResult,
+    bar,
+    address: str | None,
+    max_attempts: int,
+    single_thread: bool,
+    nice: int,
+    cpus: float,
+    gpus: float,
+) -> None:
     ray = connect_ray(address)
     # max_calls=1: a fresh worker process per cell (clean JAX state, freed memory), like the local pool;
     # retries are ours (recorded in the cell directory), so Ray's are off.

@@ -26,9 +26,9 @@ import time
 import traceback
 from pathlib import Path
 
-from d5rl.runner.grid import (CELL_FILE, DONE_FILE, ERROR_FILE, FAILURES_FILE, LOCK_FILE, LOG_FILE,
-                              RUNNER_FILES, Cell)
 from d5rl.files import read_bytes, try_lock, write_atomic
+from d5rl.runner.grid import CELL_FILE, DONE_FILE, ERROR_FILE, FAILURES_FILE, LOCK_FILE, LOG_FILE, RUNNER_FILES, Cell
+
 
 def write_cell_file(cell: Cell, cell_dir: Path) -> None:
     cell_dir.mkdir(parents=True, exist_ok=True)
@@ -100,8 +100,13 @@ def reset_cell(cell_dir: Path) -> None:
 
 def record_failure(cell_dir: Path, attempt: int, error: str, tb: str, wall_s: float | None = None) -> dict:
     rec = {
-        "attempt": attempt, "error": error, "traceback": tb, "host": socket.gethostname(),
-        "pid": os.getpid(), "time": time.strftime("%Y-%m-%dT%H:%M:%S%z"), "wall_s": wall_s,
+        "attempt": attempt,
+        "error": error,
+        "traceback": tb,
+        "host": socket.gethostname(),
+        "pid": os.getpid(),
+        "time": time.strftime("%Y-%m-%dT%H:%M:%S%z"),
+        "wall_s": wall_s,
     }
     with open(cell_dir / FAILURES_FILE, "a") as f:
         f.write(json.dumps(rec) + "\n")
@@ -137,21 +142,26 @@ def execute_cell(cell_json: dict, cell_dir: str, attempt: int = 1, capture_outpu
         redirect = _redirect_output(cdir / LOG_FILE) if capture_output else contextlib.nullcontext()
         try:
             with redirect:
-                print(f"{attempt_header(cell.key)}{attempt} on {socket.gethostname()} pid {os.getpid()} "
-                      f"at {time.strftime('%Y-%m-%d %H:%M:%S')}", flush=True)
+                print(
+                    f"{attempt_header(cell.key)}{attempt} on {socket.gethostname()} pid {os.getpid()} "
+                    f"at {time.strftime('%Y-%m-%d %H:%M:%S')}",
+                    flush=True,
+                )
                 job = resolve(cell.job)  # again, so an import error lands in the log with its traceback
                 summary = job(cell, cdir)
-        except BaseException as e:  # noqa: BLE001 - KeyboardInterrupt in a job is a failure too
+        except BaseException as e:
             wall = time.time() - start
             err = f"{type(e).__name__}: {e}"
             rec = record_failure(cdir, attempt, err, traceback.format_exc(), wall)
             if isinstance(e, KeyboardInterrupt):
                 raise
-            return {"status": "failed", "key": cell.key, "error": err, "traceback": rec["traceback"],
-                    "wall_s": wall}
+            return {"status": "failed", "key": cell.key, "error": err, "traceback": rec["traceback"], "wall_s": wall}
         wall = time.time() - start
         done = {
-            "key": cell.key, "attempt": attempt, "wall_s": wall, "host": socket.gethostname(),
+            "key": cell.key,
+            "attempt": attempt,
+            "wall_s": wall,
+            "host": socket.gethostname(),
             "finished": time.strftime("%Y-%m-%dT%H:%M:%S%z"),
             "summary": summary if isinstance(summary, dict) else None,
         }

@@ -22,8 +22,8 @@ from __future__ import annotations
 import dataclasses
 import itertools
 import json
+from collections.abc import Iterable
 from pathlib import Path
-from typing import Iterable
 
 from d5rl.errors import D5RLError
 from d5rl.files import read_json
@@ -75,7 +75,7 @@ class Cell:
         return dataclasses.asdict(self)
 
     @classmethod
-    def from_json(cls, d: dict) -> "Cell":
+    def from_json(cls, d: dict) -> Cell:
         fields = {f.name for f in dataclasses.fields(cls)}
         return cls(**{k: v for k, v in d.items() if k in fields})
 
@@ -104,9 +104,17 @@ def parse_assignments(items: Iterable[str] | None) -> dict[str, str]:
     return out
 
 
-def expand_grid(tasks: Iterable[str], algos: Iterable[str], seeds: Iterable[int], offline_steps: int,
-                online_steps: int, overrides: dict | None = None, job: str = DEFAULT_JOB,
-                tuned: bool = True, protocol_overrides: dict | None = None) -> list[Cell]:
+def expand_grid(
+    tasks: Iterable[str],
+    algos: Iterable[str],
+    seeds: Iterable[int],
+    offline_steps: int,
+    online_steps: int,
+    overrides: dict | None = None,
+    job: str = DEFAULT_JOB,
+    tuned: bool = True,
+    protocol_overrides: dict | None = None,
+) -> list[Cell]:
     """All cells of the grid.  With d5rl's trainer, agents without an offline phase (RLPD) take no
     offline steps in an offline-to-online grid (their online batches mix in the offline data)."""
     cells = []
@@ -117,9 +125,19 @@ def expand_grid(tasks: Iterable[str], algos: Iterable[str], seeds: Iterable[int]
             from d5rl.settings import run_steps
 
             offline, online = run_steps(algo, offline, online)
-        cells.append(Cell(task=task, algo=algo, seed=int(seed), offline_steps=offline, online_steps=online,
-                          overrides=dict(overrides or {}), protocol=dict(protocol_overrides or {}), job=job,
-                          tuned=bool(tuned)))
+        cells.append(
+            Cell(
+                task=task,
+                algo=algo,
+                seed=int(seed),
+                offline_steps=offline,
+                online_steps=online,
+                overrides=dict(overrides or {}),
+                protocol=dict(protocol_overrides or {}),
+                job=job,
+                tuned=bool(tuned),
+            )
+        )
     keys = [c.key for c in cells]
     dup = {k for k in keys if keys.count(k) > 1}
     if dup:
@@ -131,8 +149,11 @@ def read_cell(cell_dir: Path) -> Cell | None:
     path = Path(cell_dir) / CELL_FILE
     if not path.exists():
         return None
-    return Cell.from_json(read_json(path, "cell file", error=GridError,
-                                    hint=f"delete {cell_dir} and run the grid again (the cell starts over)"))
+    return Cell.from_json(
+        read_json(
+            path, "cell file", error=GridError, hint=f"delete {cell_dir} and run the grid again (the cell starts over)"
+        )
+    )
 
 
 def find_cells(run_dir: Path | str) -> list[tuple[Cell, Path]]:
@@ -185,8 +206,14 @@ def stale_agent(cell: Cell, cell_dir: Path) -> str | None:
 
     try:
         now = get_agent(cell.algo)[0].version
-        resolved = resolve(cell.algo, cell.task, {**cell.protocol, **cell.overrides}, offline_steps=cell.offline_steps,
-                           online_steps=cell.online_steps, tuned=cell.tuned)
+        resolved = resolve(
+            cell.algo,
+            cell.task,
+            {**cell.protocol, **cell.overrides},
+            offline_steps=cell.offline_steps,
+            online_steps=cell.online_steps,
+            tuned=cell.tuned,
+        )
     except D5RLError:  # a task or algorithm this code no longer has: nothing to compare with
         return None
     was = record.get("agent_version", 1)
@@ -204,4 +231,3 @@ def stale_agent(cell: Cell, cell_dir: Path) -> str | None:
     both = {**old_train, **old_agent}
     now_all = {**train, **agent}
     return "trained with other settings: " + ", ".join(f"{k} {both.get(k)!r} -> {now_all.get(k)!r}" for k in diffs)
-

@@ -29,8 +29,16 @@ def train_job(cell: Cell, cell_dir: Path):
             raise MissingDependencyError(f"training needs {e.name}", "pip install 'd5rl[train]'") from e
         raise
     overrides = {"progress": False, **cell.protocol, **cell.overrides}
-    summary = train(cell.algo, cell.task, cell.offline_steps, cell.online_steps, cell.seed, overrides,
-                    Path(cell_dir), tuned=cell.tuned)
+    summary = train(
+        cell.algo,
+        cell.task,
+        cell.offline_steps,
+        cell.online_steps,
+        cell.seed,
+        overrides,
+        Path(cell_dir),
+        tuned=cell.tuned,
+    )
     if not isinstance(summary, dict):
         return None
     return {k: v for k, v in summary.items() if isinstance(v, (int, float, str, bool, type(None)))}

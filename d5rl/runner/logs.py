@@ -17,7 +17,6 @@ are offline.  The final score of a phase is its *last* evaluation.
 from __future__ import annotations
 
 import csv
-import json
 import math
 from pathlib import Path
 
@@ -71,8 +70,14 @@ def read_evals(cell_dir: Path, task: str | None = None, offline_steps: int | Non
         phase = r.get("phase") or None
         if phase is None:
             phase = "offline" if offline_steps is None or step <= offline_steps else "online"
-        rows.append({"step": int(step), "phase": str(phase), "score": score,
-                     "return": _num(r.get("return", r.get("eval/return")))})
+        rows.append(
+            {
+                "step": int(step),
+                "phase": str(phase),
+                "score": score,
+                "return": _num(r.get("return", r.get("eval/return"))),
+            }
+        )
     rows.sort(key=lambda r: (r["step"], r["phase"] != "offline"))
     return rows
 

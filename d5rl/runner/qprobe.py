@@ -40,17 +40,24 @@ def q_probe(agent, batch: dict, rng: np.random.Generator) -> dict:
     in [-1, 1] drawn from ``rng``."""
     obs, act = batch["observations"], np.asarray(batch["actions"], np.float32)
     if isinstance(obs, dict) or np.ndim(obs) != 2:
-        raise D5RLError(f"the Q probe needs flat state observations, got shape {np.shape(obs)}",
-                        "probe a run on a state task (kitchen and WidowX: their -state twins)")
+        raise D5RLError(
+            f"the Q probe needs flat state observations, got shape {np.shape(obs)}",
+            "probe a run on a state task (kitchen and WidowX: their -state twins)",
+        )
     import jax
 
     policy = np.asarray(agent.eval_actions(obs, seed=jax.random.PRNGKey(0)), np.float32)  # diffusion, flow: seeded
     uniform = rng.uniform(-1.0, 1.0, act.shape).astype(np.float32)
     q_data, q_policy, q_uniform = (q_of(agent, obs, a) for a in (act, policy, uniform))
-    return {"samples": len(act), "reward_mean": float(np.mean(batch["rewards"])),
-            "q_data": float(q_data.mean()), "q_policy": float(q_policy.mean()), "q_uniform": float(q_uniform.mean()),
-            "gap_data_policy": float(np.mean(q_data - q_policy)),
-            "policy_action_distance": float(np.abs(policy - act).mean())}
+    return {
+        "samples": len(act),
+        "reward_mean": float(np.mean(batch["rewards"])),
+        "q_data": float(q_data.mean()),
+        "q_policy": float(q_policy.mean()),
+        "q_uniform": float(q_uniform.mean()),
+        "gap_data_policy": float(np.mean(q_data - q_policy)),
+        "policy_action_distance": float(np.abs(policy - act).mean()),
+    }
 
 
 def probe_run(run_dir: str | Path, samples: int = 2048, seed: int = 0) -> dict:
@@ -80,8 +87,10 @@ def main(argv=None) -> int:
     print("| run | mean reward | Q(s, a_data) | Q(s, π(s)) | Q(s, uniform) | gap data − π | abs(π(s) − a_data) |")
     print("|---|---|---|---|---|---|---|")
     for r in results:
-        print(f"| {r['run']} | {r['reward_mean']:.3f} | {r['q_data']:.1f} | {r['q_policy']:.1f} | {r['q_uniform']:.1f} "
-              f"| {r['gap_data_policy']:.2f} | {r['policy_action_distance']:.3f} |")
+        print(
+            f"| {r['run']} | {r['reward_mean']:.3f} | {r['q_data']:.1f} | {r['q_policy']:.1f} | {r['q_uniform']:.1f} "
+            f"| {r['gap_data_policy']:.2f} | {r['policy_action_distance']:.3f} |"
+        )
     return 0
 
 

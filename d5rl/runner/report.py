@@ -43,8 +43,16 @@ from d5rl.runner.logs import final_scores, read_evals
 
 # Paper order and display names; algorithms outside this list follow in alphabetical order.
 METHODS = {
-    "bc": "BC", "iql": "IQL", "cql": "CQL", "calql": "CalQL", "td3bc": "TD3+BC", "rlpd": "RLPD",
-    "ddpm_bc": "DDPM+BC", "idql": "IDQL", "fql": "FQL", "rebrac": "ReBRAC",
+    "bc": "BC",
+    "iql": "IQL",
+    "cql": "CQL",
+    "calql": "CalQL",
+    "td3bc": "TD3+BC",
+    "rlpd": "RLPD",
+    "ddpm_bc": "DDPM+BC",
+    "idql": "IDQL",
+    "fql": "FQL",
+    "rebrac": "ReBRAC",
 }
 # (benchmark group, environment label) in the paper's row order.
 ENVIRONMENTS = [
@@ -142,11 +150,27 @@ def collect(run_dir: Path | str) -> list[CellResult]:
         wall, partial = summary.get("run_wall_s"), False
         if wall is None and marker.get("wall_s") is not None:  # older runs: the last process's time only
             wall, partial = marker["wall_s"], _processes(cdir / LOG_FILE, cell.key) > 1
-        out.append(CellResult(cell.task, cell.algo, cell.seed, cell.offline_steps, cell.online_steps, cdir,
-                              done, rows, final, len(read_failures(cdir)), videos,
-                              stale=stale_reason(cell, cdir) if done else None, data=trained_on(cdir),
-                              wall_s=wall, wall_is_last_process=partial, eval_episodes=summary.get("episodes"),
-                              stats=_read_json(cdir / "summary.json").get("stats") if done else None))
+        out.append(
+            CellResult(
+                cell.task,
+                cell.algo,
+                cell.seed,
+                cell.offline_steps,
+                cell.online_steps,
+                cdir,
+                done,
+                rows,
+                final,
+                len(read_failures(cdir)),
+                videos,
+                stale=stale_reason(cell, cdir) if done else None,
+                data=trained_on(cdir),
+                wall_s=wall,
+                wall_is_last_process=partial,
+                eval_episodes=summary.get("episodes"),
+                stats=_read_json(cdir / "summary.json").get("stats") if done else None,
+            )
+        )
     return out
 
 
@@ -180,15 +204,17 @@ def table_cells(results: list[CellResult], phase: str) -> dict[tuple[str, str], 
 
 def score_table(results: list[CellResult], phase: str) -> dict[tuple[str, str], np.ndarray]:
     """``{(task, algo): final scores over seeds}`` of finished cells for one phase."""
-    return {k: np.asarray([r.final[phase] for r in cells], np.float64)
-            for k, cells in table_cells(results, phase).items()}
+    return {
+        k: np.asarray([r.final[phase] for r in cells], np.float64) for k, cells in table_cells(results, phase).items()
+    }
 
 
 def seed_interval(scores, reps: int = 2000, seed: int = 0, confidence: float = 0.95) -> tuple[float, float]:
     """The percentile-bootstrap interval of the mean score over seeds (one stratum of
     :func:`d5rl.runner.stats.stratified_bootstrap_ci`); with one seed, that seed's score twice."""
-    _, lo, hi = stats.stratified_bootstrap_ci([np.asarray(scores, np.float64)], np.mean, reps=reps,
-                                              confidence=confidence, rng=np.random.default_rng(seed))
+    _, lo, hi = stats.stratified_bootstrap_ci(
+        [np.asarray(scores, np.float64)], np.mean, reps=reps, confidence=confidence, rng=np.random.default_rng(seed)
+    )
     return lo, hi
 
 
@@ -242,8 +268,10 @@ def paper_entry(p: tuple[float, float | None] | None) -> str:
 def _grid_markdown(algos: list[str], rows, cell, label=lambda task: task) -> list[str]:
     """The header and the environment-grouped rows of a task x method table; ``cell(task, algo, entry)``
     writes one entry, ``label(task)`` one task's name."""
-    lines = ["| Environment | Task | " + " | ".join(method_name(a) for a in algos) + " |",
-             "|---|---|" + "---|" * len(algos)]
+    lines = [
+        "| Environment | Task | " + " | ".join(method_name(a) for a in algos) + " |",
+        "|---|---|" + "---|" * len(algos),
+    ]
     prev = None
     for env, task, entries in rows:
         cells = " | ".join(cell(task, a, entries[a]) for a in algos)
@@ -283,10 +311,14 @@ def comparison_markdown(table: dict, phase: str, title: str) -> str | None:
             return f"{task} (not in the paper)"
         return task if paper_task(task) == task else f"{task} (paper: {paper_task(task)})"
 
-    intro = [f"### {title} (ours / paper)", "",
-             "Each entry: this run's mean ± std over seeds / the paper's (500k steps per phase, its own data "
-             "and score references; its kitchen and WidowX agents see cameras, so a `-state` task is compared "
-             "with its camera task's row). `-`: not run here (yet), or not in the paper.", ""]
+    intro = [
+        f"### {title} (ours / paper)",
+        "",
+        "Each entry: this run's mean ± std over seeds / the paper's (500k steps per phase, its own data "
+        "and score references; its kitchen and WidowX agents see cameras, so a `-state` task is compared "
+        "with its camera task's row). `-`: not run here (yet), or not in the paper.",
+        "",
+    ]
     return "\n".join(intro + _grid_markdown(algos, rows, cell, label)) + "\n"
 
 
@@ -298,14 +330,19 @@ def _data_label(data: dict | None) -> str:
 
 
 def _duration(seconds: float) -> str:
-    return f"{seconds:.0f} s" if seconds < 120 else (f"{seconds / 60:.1f} min" if seconds < 7200
-                                                       else f"{seconds / 3600:.1f} h")
+    return (
+        f"{seconds:.0f} s"
+        if seconds < 120
+        else (f"{seconds / 60:.1f} min" if seconds < 7200 else f"{seconds / 3600:.1f} h")
+    )
 
 
 def steps_label(cells: list[CellResult]) -> str:
     """The budgets of some cells: "20,000 + 10,000 online", several joined by commas."""
-    return ", ".join(f"{off:,}" + (f" + {on:,} online" if on else "")
-                     for off, on in sorted({(c.offline_steps, c.online_steps) for c in cells}))
+    return ", ".join(
+        f"{off:,}" + (f" + {on:,} online" if on else "")
+        for off, on in sorted({(c.offline_steps, c.online_steps) for c in cells})
+    )
 
 
 def protocol_markdown(results: list[CellResult]) -> str | None:
@@ -318,14 +355,18 @@ def protocol_markdown(results: list[CellResult]) -> str | None:
         return None
     order = method_order({a for _, a in groups})
     keys = sorted(groups, key=lambda k: (*task_order(k[0]), order.index(k[1])))
-    lines = ["### Protocol and cost", "",
-             "Per task and method, over the finished cells: gradient steps (then online environment steps), "
-             "episodes of the final evaluation, the dataset the cells trained on, and the median wall time of a "
-             "cell summed over the processes that ran it (a cell resumed after a stop has several; its host and the "
-             "others running beside it vary; see each cell's `done`; '>=': some cells were resumed before runs added "
-             "up their processes' times, so only the last one's is known).", "",
-             "| Task | Method | Cells | Steps | Final evaluation | Dataset | Wall time per cell |",
-             "|---|---|---|---|---|---|---|"]
+    lines = [
+        "### Protocol and cost",
+        "",
+        "Per task and method, over the finished cells: gradient steps (then online environment steps), "
+        "episodes of the final evaluation, the dataset the cells trained on, and the median wall time of a "
+        "cell summed over the processes that ran it (a cell resumed after a stop has several; its host and the "
+        "others running beside it vary; see each cell's `done`; '>=': some cells were resumed before runs added "
+        "up their processes' times, so only the last one's is known).",
+        "",
+        "| Task | Method | Cells | Steps | Final evaluation | Dataset | Wall time per cell |",
+        "|---|---|---|---|---|---|---|",
+    ]
     for task, algo in keys:
         cells = groups[(task, algo)]
         steps = steps_label(cells)
@@ -335,8 +376,10 @@ def protocol_markdown(results: list[CellResult]) -> str | None:
         wall = _duration(float(np.median(walls))) if walls else "-"
         if walls and any(c.wall_is_last_process for c in cells):
             wall = ">= " + wall
-        lines.append(f"| {task} | {method_name(algo)} | {len(cells)} | {steps} | "
-                     f"{eps + ' episodes' if eps else '-'} | {data} | {wall} |")
+        lines.append(
+            f"| {task} | {method_name(algo)} | {len(cells)} | {steps} | "
+            f"{eps + ' episodes' if eps else '-'} | {data} | {wall} |"
+        )
     return "\n".join(lines) + "\n"
 
 
@@ -345,7 +388,8 @@ BEHAVIOUR_NOTE = (
     "averaged over episodes and then over the cells that recorded them (cells trained by older d5rl versions did not). "
     "Kitchen: the fraction of episodes in which each subtask's object reached its goal configuration, counted by "
     "the task or not; WidowX: the object was lifted off the table, ends in its bin, ends in the other bin; A1: "
-    "mean forward speed (m/s), episodes that ended early (a fall, or off the course), waypoints reached.")
+    "mean forward speed (m/s), episodes that ended early (a fall, or off the course), waypoints reached."
+)
 
 
 def behaviour_table(results: list[CellResult]) -> list[dict]:
@@ -364,10 +408,22 @@ def behaviour_table(results: list[CellResult]) -> list[dict]:
         rows = []
         for algo in method_order(by_algo):
             vals = {k: [st[k] for st in by_algo[algo] if k in st] for k in keys}
-            rows.append({"algo": algo, "method": method_name(algo), "cells": len(by_algo[algo]),
-                         "stats": {k: float(np.mean(v)) if v else None for k, v in vals.items()}})
-        out.append({"task": task, "keys": keys, "labels": [k.removeprefix("subtask/").replace("_", " ") for k in keys],
-                    "rows": rows})
+            rows.append(
+                {
+                    "algo": algo,
+                    "method": method_name(algo),
+                    "cells": len(by_algo[algo]),
+                    "stats": {k: float(np.mean(v)) if v else None for k, v in vals.items()},
+                }
+            )
+        out.append(
+            {
+                "task": task,
+                "keys": keys,
+                "labels": [k.removeprefix("subtask/").replace("_", " ") for k in keys],
+                "rows": rows,
+            }
+        )
     return out
 
 
@@ -378,12 +434,19 @@ def behaviour_markdown(results: list[CellResult]) -> str | None:
         return None
     lines = ["### What the agents do", "", BEHAVIOUR_NOTE, ""]
     for t in tables:
-        lines += [f"**{t['task']}**", "", "| Method | Cells | " + " | ".join(t["labels"]) + " |",
-                  "|---|---|" + "---|" * len(t["keys"])]
+        lines += [
+            f"**{t['task']}**",
+            "",
+            "| Method | Cells | " + " | ".join(t["labels"]) + " |",
+            "|---|---|" + "---|" * len(t["keys"]),
+        ]
         for row in t["rows"]:
             vals = [row["stats"][k] for k in t["keys"]]
-            lines.append(f"| {row['method']} | {row['cells']} | "
-                         + " | ".join("-" if v is None else _fmt(v, 2) for v in vals) + " |")
+            lines.append(
+                f"| {row['method']} | {row['cells']} | "
+                + " | ".join("-" if v is None else _fmt(v, 2) for v in vals)
+                + " |"
+            )
         lines.append("")
     return "\n".join(lines)
 
@@ -416,24 +479,53 @@ def aggregate(table: dict, reps: int = 2000, seed: int = 0) -> list[dict]:
             rng = np.random.default_rng(seed)
             point, lo, hi = stats.stratified_bootstrap_ci(strata, stats.iqm, reps=reps, rng=rng)
             pooled = np.concatenate(strata)
-            out.append({"method": a, "group": label, "tasks": len(strata), "runs": int(pooled.size),
-                        "iqm": point, "iqm_lo": lo, "iqm_hi": hi, "mean": float(pooled.mean())})
+            out.append(
+                {
+                    "method": a,
+                    "group": label,
+                    "tasks": len(strata),
+                    "runs": int(pooled.size),
+                    "iqm": point,
+                    "iqm_lo": lo,
+                    "iqm_hi": hi,
+                    "mean": float(pooled.mean()),
+                }
+            )
     return out
 
 
 def aggregate_markdown(rows: list[dict], title: str, reps: int) -> str:
-    lines = [f"### {title}", "",
-             f"IQM of normalized scores pooled over tasks and seeds, 95 % stratified-bootstrap CI ({reps} resamples).",
-             "", "| Method | Group | Tasks | Runs | IQM | 95 % CI | Mean |", "|---|---|---|---|---|---|---|"]
+    lines = [
+        f"### {title}",
+        "",
+        f"IQM of normalized scores pooled over tasks and seeds, 95 % stratified-bootstrap CI ({reps} resamples).",
+        "",
+        "| Method | Group | Tasks | Runs | IQM | 95 % CI | Mean |",
+        "|---|---|---|---|---|---|---|",
+    ]
     for r in rows:
-        lines.append(f"| {method_name(r['method'])} | {r['group']} | {r['tasks']} | {r['runs']} | {_fmt(r['iqm'])} "
-                     f"| {interval(r['iqm_lo'], r['iqm_hi'])} | {_fmt(r['mean'])} |")
+        lines.append(
+            f"| {method_name(r['method'])} | {r['group']} | {r['tasks']} | {r['runs']} | {_fmt(r['iqm'])} "
+            f"| {interval(r['iqm_lo'], r['iqm_hi'])} | {_fmt(r['mean'])} |"
+        )
     return "\n".join(lines) + "\n"
 
 
 def aggregate_csv(rows: list[dict], table_name: str) -> list[list]:
-    return [[table_name, r["method"], r["group"], r["tasks"], r["runs"], repr(r["iqm"]), repr(r["iqm_lo"]),
-             repr(r["iqm_hi"]), repr(r["mean"])] for r in rows]
+    return [
+        [
+            table_name,
+            r["method"],
+            r["group"],
+            r["tasks"],
+            r["runs"],
+            repr(r["iqm"]),
+            repr(r["iqm_lo"]),
+            repr(r["iqm_hi"]),
+            repr(r["mean"]),
+        ]
+        for r in rows
+    ]
 
 
 def mean_curves(cells: list[CellResult]) -> dict[str, tuple[np.ndarray, np.ndarray, np.ndarray]]:
@@ -448,8 +540,11 @@ def mean_curves(cells: list[CellResult]) -> dict[str, tuple[np.ndarray, np.ndarr
             for e in c.evals:
                 per_step.setdefault(e["step"], []).append(e["score"])
         steps = np.array(sorted(per_step))
-        out[a] = (steps, np.array([np.mean(per_step[s]) for s in steps]),
-                  np.array([np.std(per_step[s]) for s in steps]))
+        out[a] = (
+            steps,
+            np.array([np.mean(per_step[s]) for s in steps]),
+            np.array([np.std(per_step[s]) for s in steps]),
+        )
     return out
 
 
@@ -489,15 +584,22 @@ def plot_curves(results: list[CellResult], out_dir: Path) -> list[Path]:
     return paths
 
 
-def write_report(run_dir: Path | str, out_dir: Path | str | None = None, reps: int = 2000, seed: int = 0,
-                 plots: bool = True, videos: bool = False) -> Path:
+def write_report(
+    run_dir: Path | str,
+    out_dir: Path | str | None = None,
+    reps: int = 2000,
+    seed: int = 0,
+    plots: bool = True,
+    videos: bool = False,
+) -> Path:
     """Write every report file; returns the path of ``report.md``.  ``videos``: also render one rollout GIF
     per task from the best cell's checkpoint (:mod:`d5rl.runner.videos`)."""
     run_dir = Path(run_dir)
     for name, v, least, default in (("reps", reps, 1, 2000), ("seed", seed, 0, 0)):
         if not is_int(v, lo=least):
-            raise ReportError(f"--{name} must be an integer >= {least}, got {v!r}",
-                              f"omit --{name} for its default ({default})")
+            raise ReportError(
+                f"--{name} must be an integer >= {least}, got {v!r}", f"omit --{name} for its default ({default})"
+            )
     if not run_dir.is_dir():
         raise ReportError(f"{run_dir} is not a directory", "pass the --out directory of `d5rl bench`")
     results = collect(run_dir)
@@ -508,26 +610,61 @@ def write_report(run_dir: Path | str, out_dir: Path | str | None = None, reps: i
 
     with open(out / "scores.csv", "w", newline="") as f:
         w = csv.writer(f)
-        w.writerow(["environment", "task", "algo", "seed", "done", "offline_steps", "online_steps",
-                    "offline_score", "offline_score_step", "online_score", "online_score_step", "evaluations",
-                    "failed_attempts", "stale"])
+        w.writerow(
+            [
+                "environment",
+                "task",
+                "algo",
+                "seed",
+                "done",
+                "offline_steps",
+                "online_steps",
+                "offline_score",
+                "offline_score_step",
+                "online_score",
+                "online_score_step",
+                "evaluations",
+                "failed_attempts",
+                "stale",
+            ]
+        )
         for r in sorted(results, key=lambda r: (r.task, r.algo, r.seed)):
-            w.writerow([environment(r.task), r.task, r.algo, r.seed, int(r.done), r.offline_steps, r.online_steps,
-                        repr(r.final["offline"]) if "offline" in r.final else "", r.final_step.get("offline", ""),
-                        repr(r.final["online"]) if "online" in r.final else "", r.final_step.get("online", ""),
-                        len(r.evals), r.failures, r.stale or ""])
+            w.writerow(
+                [
+                    environment(r.task),
+                    r.task,
+                    r.algo,
+                    r.seed,
+                    int(r.done),
+                    r.offline_steps,
+                    r.online_steps,
+                    repr(r.final["offline"]) if "offline" in r.final else "",
+                    r.final_step.get("offline", ""),
+                    repr(r.final["online"]) if "online" in r.final else "",
+                    r.final_step.get("online", ""),
+                    len(r.evals),
+                    r.failures,
+                    r.stale or "",
+                ]
+            )
 
     run_name = run_dir.parent.name if run_dir.name == GRID_FOLDER else run_dir.name
     stale = [r for r in results if r.done and r.stale is not None]
-    parts = [f"# Benchmark report: {run_name}", "",
-             f"{sum(r.counts for r in results)} of {len(results)} cells finished"
-             f"{f' ({len(stale)} more on older data or agents: see Stale cells)' if stale else ''}. "
-             "Scores are normalized "
-             "(0 = random, 1 = expert reference of the task); each cell's score is its last evaluation "
-             "of the phase. ± is the standard deviation over seeds (ddof=0).", ""]
+    parts = [
+        f"# Benchmark report: {run_name}",
+        "",
+        f"{sum(r.counts for r in results)} of {len(results)} cells finished"
+        f"{f' ({len(stale)} more on older data or agents: see Stale cells)' if stale else ''}. "
+        "Scores are normalized "
+        "(0 = random, 1 = expert reference of the task); each cell's score is its last evaluation "
+        "of the phase. ± is the standard deviation over seeds (ddof=0).",
+        "",
+    ]
     agg_rows = []
-    for phase, name, title in (("offline", "table1_offline", "Table 1: offline"),
-                               ("online", "table2_online", "Table 2: offline-to-online")):
+    for phase, name, title in (
+        ("offline", "table1_offline", "Table 1: offline"),
+        ("online", "table2_online", "Table 2: offline-to-online"),
+    ):
         table = score_table(results, phase)
         if not table:
             continue
@@ -542,8 +679,10 @@ def write_report(run_dir: Path | str, out_dir: Path | str | None = None, reps: i
             (out / f"{name}_vs_paper.md").write_text(vs)
             parts.append(vs)
     if not agg_rows:
-        raise ReportError(f"no finished cell under {run_dir} has evaluations",
-                          "check the cells' log.txt / error.txt, then resume with the same `d5rl bench` command")
+        raise ReportError(
+            f"no finished cell under {run_dir} has evaluations",
+            "check the cells' log.txt / error.txt, then resume with the same `d5rl bench` command",
+        )
     with open(out / "aggregate.csv", "w", newline="") as f:
         w = csv.writer(f)
         w.writerow(["table", "method", "group", "tasks", "runs", "iqm", "iqm_lo", "iqm_hi", "mean"])
@@ -575,24 +714,45 @@ def write_report(run_dir: Path | str, out_dir: Path | str | None = None, reps: i
 
     gifs = {t: c for t, c in sorted(read_captions(out / "videos").items()) if (out / "videos" / f"{t}.gif").exists()}
     if gifs:
-        parts += ["## Rollouts", "", "One evaluation episode per task of its best cell's final policy "
-                  "(`d5rl report RUN_DIR --videos`).", ""]
+        parts += [
+            "## Rollouts",
+            "",
+            "One evaluation episode per task of its best cell's final policy (`d5rl report RUN_DIR --videos`).",
+            "",
+        ]
         for task, caption in gifs.items():
             parts += [f"**{task}**: {caption}", "", f"![{task}](videos/{task}.gif)", ""]
 
-    early = [r for r in results if r.done and r.online_steps > 0 and r.final_step.get("offline", r.offline_steps)
-             != r.offline_steps]
+    early = [
+        r
+        for r in results
+        if r.done and r.online_steps > 0 and r.final_step.get("offline", r.offline_steps) != r.offline_steps
+    ]
     if early:
-        parts += ["## Caveats", "", "These cells have no evaluation exactly at the end of the offline phase; their "
-                  "Table 1 entry uses their last offline evaluation (step in scores.csv). Choose an evaluation "
-                  "interval that divides --offline-steps to avoid this.", ""]
-        parts += [f"- {r.task}/{r.algo}/seed{r.seed}: offline score from step {r.final_step.get('offline')} "
-                  f"of {r.offline_steps}" for r in early] + [""]
+        parts += [
+            "## Caveats",
+            "",
+            "These cells have no evaluation exactly at the end of the offline phase; their "
+            "Table 1 entry uses their last offline evaluation (step in scores.csv). Choose an evaluation "
+            "interval that divides --offline-steps to avoid this.",
+            "",
+        ]
+        parts += [
+            f"- {r.task}/{r.algo}/seed{r.seed}: offline score from step {r.final_step.get('offline')} "
+            f"of {r.offline_steps}"
+            for r in early
+        ] + [""]
     if stale:
-        parts += ["## Stale cells", "", "Trained on data their task no longer has, or by an older version or other "
-                  "settings of their agent, so left out of every table above. The same `d5rl bench` command trains "
-                  "them again.", "",
-                  "| Cell | Why |", "|---|---|"]
+        parts += [
+            "## Stale cells",
+            "",
+            "Trained on data their task no longer has, or by an older version or other "
+            "settings of their agent, so left out of every table above. The same `d5rl bench` command trains "
+            "them again.",
+            "",
+            "| Cell | Why |",
+            "|---|---|",
+        ]
         parts += [f"| {r.task}/{r.algo}/seed{r.seed} | {r.stale} |" for r in stale] + [""]
     incomplete = [r for r in results if not r.done]
     if incomplete:

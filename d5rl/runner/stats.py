@@ -24,7 +24,7 @@ tested against ``scipy.stats.trim_mean`` and against exhaustive enumeration of e
 
 from __future__ import annotations
 
-from typing import Callable, Sequence
+from collections.abc import Callable, Sequence
 
 import numpy as np
 
@@ -38,7 +38,7 @@ def iqm(scores) -> float:
     if n == 0:
         raise D5RLError("IQM of no scores", "check that the runs produced evaluation logs")
     k = int(0.25 * n)
-    return float(x[k:n - k].mean())
+    return float(x[k : n - k].mean())
 
 
 def _as_strata(scores_per_task) -> list[np.ndarray]:
@@ -53,9 +53,13 @@ def _as_strata(scores_per_task) -> list[np.ndarray]:
     return strata
 
 
-def bootstrap_replicates(scores_per_task, statistic: Callable = iqm, reps: int = 2000,
-                         rng: np.random.Generator | None = None,
-                         indices: Sequence[Sequence[np.ndarray]] | None = None) -> np.ndarray:
+def bootstrap_replicates(
+    scores_per_task,
+    statistic: Callable = iqm,
+    reps: int = 2000,
+    rng: np.random.Generator | None = None,
+    indices: Sequence[Sequence[np.ndarray]] | None = None,
+) -> np.ndarray:
     """The statistic on ``reps`` stratified resamples.
 
     ``indices`` (optional, for exhaustive checks) gives the resamples explicitly:
@@ -74,7 +78,7 @@ def bootstrap_replicates(scores_per_task, statistic: Callable = iqm, reps: int =
             pooled.sort(axis=1)
             n = pooled.shape[1]
             k = int(0.25 * n)
-            return pooled[:, k:n - k].mean(axis=1)
+            return pooled[:, k : n - k].mean(axis=1)
         indices = [[d[r] for d in draws] for r in range(reps)]
     out = np.empty(len(indices), np.float64)
     for r, idx in enumerate(indices):
@@ -82,9 +86,14 @@ def bootstrap_replicates(scores_per_task, statistic: Callable = iqm, reps: int =
     return out
 
 
-def stratified_bootstrap_ci(scores_per_task, statistic: Callable = iqm, reps: int = 2000,
-                            confidence: float = 0.95, rng: np.random.Generator | None = None,
-                            indices=None) -> tuple[float, float, float]:
+def stratified_bootstrap_ci(
+    scores_per_task,
+    statistic: Callable = iqm,
+    reps: int = 2000,
+    confidence: float = 0.95,
+    rng: np.random.Generator | None = None,
+    indices=None,
+) -> tuple[float, float, float]:
     """``(point estimate, lower, upper)`` of ``statistic`` with a percentile bootstrap interval."""
     strata = _as_strata(scores_per_task)
     point = statistic(np.concatenate(strata))

@@ -97,8 +97,10 @@ def write_rollout_gifs(results, out_dir: Path, log=print) -> dict[str, str]:
                 continue
             frames, fps, seed, scores = typical_rollout(cell.directory, task)
             write_gif(videos / f"{task}.gif", frames, fps)
-            captions[task] = (f"{_cell_label(cell)}; episode seed {seed}, the median of {len(scores)} "
-                              f"({', '.join(f'{x:.2f}' for x in scores)})")
+            captions[task] = (
+                f"{_cell_label(cell)}; episode seed {seed}, the median of {len(scores)} "
+                f"({', '.join(f'{x:.2f}' for x in scores)})"
+            )
             log(f"rollout {task}: {captions[task]}")
             break
     _write_captions(videos, captions)

@@ -19,6 +19,7 @@ def main(argv: list[str] | None = None) -> int:
         spec = json.load(f)
     configure_worker(spec.get("single_thread", True), spec.get("nice", 0))  # before JAX is imported
     from d5rl.runner.execute import EXIT_CODES
+
     for p in reversed(spec.get("sys_path", [])):  # the caller's import path (its jobs, test modules)
         if p not in sys.path:
             sys.path.insert(0, p)

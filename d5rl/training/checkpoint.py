@@ -76,14 +76,18 @@ def save_checkpoint(run_dir: str | Path, ckpt: Checkpoint) -> Path:
         shutil.rmtree(stale, ignore_errors=True)
     tmp = run_dir / f"{TMP_PREFIX}{os.getpid()}"
     tmp.mkdir(parents=True)
-    files = {"agent.msgpack": bytes(ckpt.agent),
-             "state.json": (json.dumps(ckpt.state, sort_keys=True, allow_nan=False) + "\n").encode()}
+    files = {
+        "agent.msgpack": bytes(ckpt.agent),
+        "state.json": (json.dumps(ckpt.state, sort_keys=True, allow_nan=False) + "\n").encode(),
+    }
     if ckpt.buffer is not None:
         bio = io.BytesIO()
         np.savez(bio, **ckpt.buffer)
         files["buffer.npz"] = bio.getvalue()
-    manifest = {"format_version": FORMAT_VERSION,
-                "files": {name: {"sha256": _sha256(data), "bytes": len(data)} for name, data in files.items()}}
+    manifest = {
+        "format_version": FORMAT_VERSION,
+        "files": {name: {"sha256": _sha256(data), "bytes": len(data)} for name, data in files.items()},
+    }
     files[MANIFEST] = (json.dumps(manifest, indent=1, sort_keys=True) + "\n").encode()
     for name, data in files.items():
         with open(tmp / name, "wb") as f:
@@ -107,19 +111,25 @@ def _manifest_files(manifest, where: Path) -> dict[str, dict]:
     """The ``files`` of a checkpoint manifest, each name a plain file and each entry ``{sha256, bytes}``."""
     files = manifest.get("files")
     if not isinstance(files, dict):
-        raise json_type_error("checkpoint manifest", where, "files", files, "an object of file names",
-                              CheckpointError)
+        raise json_type_error("checkpoint manifest", where, "files", files, "an object of file names", CheckpointError)
     for name, info in files.items():
         if "/" in name or name.startswith("."):
             raise CheckpointError(f"{where} names an unexpected file {name!r}")
         if not (isinstance(info, dict) and is_int(info.get("bytes"), lo=0) and isinstance(info.get("sha256"), str)):
-            raise json_type_error("checkpoint manifest", where, f"files[{name!r}]", info,
-                                  "an object with the file's bytes and sha256", CheckpointError)
+            raise json_type_error(
+                "checkpoint manifest",
+                where,
+                f"files[{name!r}]",
+                info,
+                "an object with the file's bytes and sha256",
+                CheckpointError,
+            )
     return files
 
 
 def check_state(state, where: Path) -> dict:
     """A training run's checkpoint ``state.json`` with the types ``RunState.from_json`` needs (one line if not)."""
+
     def bad(field, value, expected):
         return json_type_error("checkpoint state", where, field, value, expected, CheckpointError)
 
@@ -131,8 +141,9 @@ def check_state(state, where: Path) -> dict:
     if not isinstance(state.get("online_started"), bool):
         raise bad("online_started", state.get("online_started"), "true or false")
     sums = state.get("metric_sums")
-    if not isinstance(sums, dict) or not all(isinstance(v, (int, float)) and not isinstance(v, bool)
-                                             for v in sums.values()):
+    if not isinstance(sums, dict) or not all(
+        isinstance(v, (int, float)) and not isinstance(v, bool) for v in sums.values()
+    ):
         raise bad("metric_sums", sums, "an object of numbers")
     elapsed = state.get("elapsed_s", 0.0)
     if isinstance(elapsed, bool) or not isinstance(elapsed, (int, float)) or not elapsed >= 0:
@@ -151,22 +162,32 @@ def read_checkpoint(path: str | Path) -> Checkpoint:
     symlink to ``/dev/zero`` or a FIFO is refused, not read until memory or patience runs out)."""
     path = Path(path)
     if (path / "state.pkl").exists() and not (path / MANIFEST).exists():
-        raise CheckpointError(f"{path} is a pickle checkpoint of an older d5rl, which this version never opens "
-                              "(unpickling can run code)", "train again from scratch in a new --run-dir")
+        raise CheckpointError(
+            f"{path} is a pickle checkpoint of an older d5rl, which this version never opens (unpickling can run code)",
+            "train again from scratch in a new --run-dir",
+        )
     try:
-        manifest = read_json(path / MANIFEST, "checkpoint manifest", max_bytes=MANIFEST_MAX_BYTES,
-                             error=CheckpointError)
+        manifest = read_json(
+            path / MANIFEST, "checkpoint manifest", max_bytes=MANIFEST_MAX_BYTES, error=CheckpointError
+        )
     except FileNotFoundError:
         raise CheckpointError(f"{path / MANIFEST} is missing (an incomplete checkpoint)") from None
     if not isinstance(manifest, dict) or manifest.get("format_version") != FORMAT_VERSION:
         version = manifest.get("format_version") if isinstance(manifest, dict) else None
-        raise CheckpointError(f"{path} has checkpoint format {version!r}; this d5rl reads {FORMAT_VERSION}",
-                              "use the d5rl version that wrote it, or train again in a new --run-dir")
+        raise CheckpointError(
+            f"{path} has checkpoint format {version!r}; this d5rl reads {FORMAT_VERSION}",
+            "use the d5rl version that wrote it, or train again in a new --run-dir",
+        )
     data: dict[str, bytes] = {}
     for name, info in _manifest_files(manifest, path / MANIFEST).items():
         try:
-            blob = read_bytes(path / name, info["bytes"], "checkpoint file", error=CheckpointError,
-                              hint=f"delete {path} to fall back to the previous checkpoint")
+            blob = read_bytes(
+                path / name,
+                info["bytes"],
+                "checkpoint file",
+                error=CheckpointError,
+                hint=f"delete {path} to fall back to the previous checkpoint",
+            )
         except FileNotFoundError:
             raise CheckpointError(f"{path / name} is missing") from None
         if len(blob) != info["bytes"] or _sha256(blob) != info["sha256"]:
@@ -209,8 +230,10 @@ def load_checkpoint(run_dir: str | Path, warn=None) -> Checkpoint | None:
             warn(f"{first_error.message}; using the previous checkpoint {path}")
         return ckpt
     if first_error is not None:
-        raise CheckpointError(first_error.message,
-                              first_error.hint or f"delete {run_dir}/checkpoint* to start over, or pick another --run-dir")
+        raise CheckpointError(
+            first_error.message,
+            first_error.hint or f"delete {run_dir}/checkpoint* to start over, or pick another --run-dir",
+        )
     return None
 
 
@@ -222,13 +245,19 @@ def restore_agent(agent, ckpt: Checkpoint):
     try:
         restored = agent.from_bytes(ckpt.agent)
     except Exception as e:  # noqa: BLE001 - msgpack/flax raise many types for a mismatched tree
-        raise CheckpointError(f"{ckpt.path / 'agent.msgpack'} does not fit this agent ({e.__class__.__name__}: "
-                              f"{str(e).splitlines()[0][:160] if str(e) else ''})", hint) from None
+        raise CheckpointError(
+            f"{ckpt.path / 'agent.msgpack'} does not fit this agent ({e.__class__.__name__}: "
+            f"{str(e).splitlines()[0][:160] if str(e) else ''})",
+            hint,
+        ) from None
     # flax restores arrays of any shape into the tree: a checkpoint of another observation size
     # would only fail deep inside the first update
     for (path, new), old in zip(jax.tree_util.tree_leaves_with_path(restored), jax.tree_util.tree_leaves(agent)):
         if np.shape(new) != np.shape(old):
-            raise CheckpointError(f"{ckpt.path / 'agent.msgpack'} does not fit this agent: "
-                                  f"{jax.tree_util.keystr(path)} has shape {np.shape(new)}, this agent's "
-                                  f"{np.shape(old)} (another observation or action size?)", hint)
+            raise CheckpointError(
+                f"{ckpt.path / 'agent.msgpack'} does not fit this agent: "
+                f"{jax.tree_util.keystr(path)} has shape {np.shape(new)}, this agent's "
+                f"{np.shape(old)} (another observation or action size?)",
+                hint,
+            )
     return restored

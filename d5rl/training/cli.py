@@ -10,21 +10,36 @@ def add_train_parser(subparsers) -> argparse.ArgumentParser:
     from d5rl.agents import AGENTS
 
     p = subparsers.add_parser(
-        "train", help="train a reference agent offline (and optionally fine-tune online)",
+        "train",
+        help="train a reference agent offline (and optionally fine-tune online)",
         description="Train ALGO on TASK. Runs resume from their checkpoint when started again with the same "
-                    "--run-dir. Config keys (agent and loop) are set with --set key=value; "
-                    "see `d5rl train ALGO TASK --show-config`.")
+        "--run-dir. Config keys (agent and loop) are set with --set key=value; "
+        "see `d5rl train ALGO TASK --show-config`.",
+    )
     p.add_argument("algo", choices=sorted(AGENTS), help="agent")
     p.add_argument("task", help="task id (`d5rl list`)")
-    p.add_argument("--offline-steps", type=int, default=None, help="gradient updates on the dataset "
-                   "(default 500000; none for RLPD when fine-tuning online)")
+    p.add_argument(
+        "--offline-steps",
+        type=int,
+        default=None,
+        help="gradient updates on the dataset (default 500000; none for RLPD when fine-tuning online)",
+    )
     p.add_argument("--online-steps", type=int, default=0, help="environment steps of online fine-tuning")
     p.add_argument("--seed", type=int, default=0)
-    p.add_argument("--set", dest="overrides", action="append", default=[], metavar="KEY=VALUE",
-                   help="override a config value (repeatable)")
+    p.add_argument(
+        "--set",
+        dest="overrides",
+        action="append",
+        default=[],
+        metavar="KEY=VALUE",
+        help="override a config value (repeatable)",
+    )
     p.add_argument("--run-dir", default=None, help="default: runs/TASK/ALGO/seedS")
-    p.add_argument("--show-config", action="store_true",
-                   help="print the config this run would use (d5rl/configs/settings.json under --set) and exit")
+    p.add_argument(
+        "--show-config",
+        action="store_true",
+        help="print the config this run would use (d5rl/configs/settings.json under --set) and exit",
+    )
     p.set_defaults(func=cmd_train)
     return p
 
@@ -38,8 +53,11 @@ def cmd_train(args) -> int:
 
     offline, online = run_steps(args.algo, args.offline_steps, args.online_steps)
     if args.offline_steps and offline != args.offline_steps:
-        print(f"note: {args.algo} has no offline phase before fine-tuning (its online batches mix in the offline "
-              f"data); training {online} online steps only", file=sys.stderr)
+        print(
+            f"note: {args.algo} has no offline phase before fine-tuning (its online batches mix in the offline "
+            f"data); training {online} online steps only",
+            file=sys.stderr,
+        )
     check_run(offline, online, args.seed)
     run = resolve(args.algo, args.task, args.overrides, offline_steps=offline, online_steps=online)
     if args.show_config:
@@ -58,8 +76,9 @@ def add_eval_parser(subparsers) -> argparse.ArgumentParser:
     p.add_argument("--envs", type=int, default=5, help="environments stepped in lockstep")
     p.add_argument("--processes", action="store_true", help="one process per environment")
     p.add_argument("--seed", type=int, default=12345, help="episode i resets with seed + i")
-    p.add_argument("--video", default=None, metavar="PATH",
-                   help="record the first episode (.mp4, .mkv, .mov, .avi or .gif)")
+    p.add_argument(
+        "--video", default=None, metavar="PATH", help="record the first episode (.mp4, .mkv, .mov, .avi or .gif)"
+    )
     p.add_argument("--task", default=None, help="evaluate on another task id (same spaces)")
     p.add_argument("--json", action="store_true", help="print the result as JSON")
     p.set_defaults(func=cmd_eval)
@@ -78,15 +97,25 @@ def cmd_eval(args) -> int:
     task = args.task or resolved["task_id"]
     if task != resolved["task_id"]:
         _check_same_spaces(resolved["task_id"], task)
-    res = evaluate(agent, task, args.episodes, args.seed, num_envs=args.envs,
-                   frame_stack=resolved["train"]["frame_stack"], processes=args.processes, video_path=args.video)
+    res = evaluate(
+        agent,
+        task,
+        args.episodes,
+        args.seed,
+        num_envs=args.envs,
+        frame_stack=resolved["train"]["frame_stack"],
+        processes=args.processes,
+        video_path=args.video,
+    )
     res.pop("returns", None)
     if args.json:
         print(json.dumps({"task_id": task, **res}, indent=2))
         return 0
-    print(f"{task}: {res['episodes']} episodes, return {res['return']:.2f} ± {res['return_std']:.2f}, "
-          f"length {res['length']:.1f}, success {res['success']:.2f}" + (f", video {res['video']}" if "video" in res
-                                                                          else ""))
+    print(
+        f"{task}: {res['episodes']} episodes, return {res['return']:.2f} ± {res['return_std']:.2f}, "
+        f"length {res['length']:.1f}, success {res['success']:.2f}"
+        + (f", video {res['video']}" if "video" in res else "")
+    )
     for k, v in res.get("stats", {}).items():
         print(f"  {k}: {v:.2f}")
     if "score" in res:
@@ -113,4 +142,3 @@ def _check_same_spaces(trained_on: str, task: str) -> None:
                 f"the agent was trained on {trained_on}, whose {what} space {a} differs from {task}'s {b}",
                 "pass a --task whose spaces match (`d5rl info TASK` prints them)",
             )
-

@@ -3,7 +3,7 @@
 
 from __future__ import annotations
 
-from typing import Mapping
+from collections.abc import Mapping
 
 from d5rl.agents.config import Bound, Config, ConfigError
 from d5rl.errors import is_int
@@ -35,17 +35,30 @@ def get_train_config() -> Config:
 # Settings that change how a run executes, never what it computes (a grid may resume or rerun a cell with
 # other values of these and it stays the same cell).  Evaluation episodes reset with fixed seeds whatever the
 # number of environments or processes stepping them (tests/training/test_parts.py).
-EXECUTION_KEYS = ("checkpoint_interval", "dataset_in_memory_gb", "eval_envs", "eval_processes", "progress",
-                  "tensorboard")
+EXECUTION_KEYS = (
+    "checkpoint_interval",
+    "dataset_in_memory_gb",
+    "eval_envs",
+    "eval_processes",
+    "progress",
+    "tensorboard",
+)
 
 # What each training setting may be (checked before any work; see get_train_config for meanings).
 TRAIN_BOUNDS = {
-    "eval_interval": Bound(int, ge=0), "eval_episodes": Bound(int, ge=1),
-    "final_eval_episodes": Bound(int, ge=1, optional=True), "eval_envs": Bound(int, ge=1),
-    "log_interval": Bound(int, ge=1), "checkpoint_interval": Bound(int, ge=1), "updates_per_call": Bound(int, ge=1),
-    "frame_stack": Bound(int, ge=1, optional=True), "offline_ratio": Bound(float, ge=0, le=1, optional=True),
-    "start_steps": Bound(int, ge=0, optional=True), "buffer_capacity": Bound(int, ge=1, optional=True),
-    "dataset_episodes": Bound(int, ge=1, optional=True), "dataset_in_memory_gb": Bound(float, ge=0, optional=True),
+    "eval_interval": Bound(int, ge=0),
+    "eval_episodes": Bound(int, ge=1),
+    "final_eval_episodes": Bound(int, ge=1, optional=True),
+    "eval_envs": Bound(int, ge=1),
+    "log_interval": Bound(int, ge=1),
+    "checkpoint_interval": Bound(int, ge=1),
+    "updates_per_call": Bound(int, ge=1),
+    "frame_stack": Bound(int, ge=1, optional=True),
+    "offline_ratio": Bound(float, ge=0, le=1, optional=True),
+    "start_steps": Bound(int, ge=0, optional=True),
+    "buffer_capacity": Bound(int, ge=1, optional=True),
+    "dataset_episodes": Bound(int, ge=1, optional=True),
+    "dataset_in_memory_gb": Bound(float, ge=0, optional=True),
 }
 
 
@@ -55,8 +68,10 @@ def check_run(offline_steps, online_steps, seed) -> None:
         if not is_int(v, lo=0):
             raise ConfigError(f"{name} must be a non-negative integer, got {v!r}", f"pass e.g. {name} 0")
     if offline_steps == 0 and online_steps == 0:
-        raise ConfigError("nothing to train: --offline-steps and --online-steps are both 0",
-                          "pass --offline-steps N (and/or --online-steps N)")
+        raise ConfigError(
+            "nothing to train: --offline-steps and --online-steps are both 0",
+            "pass --offline-steps N (and/or --online-steps N)",
+        )
 
 
 def split_overrides(overrides, agent_config: Config, train_config: Config) -> tuple[Config, Config]:
@@ -71,8 +86,10 @@ def split_overrides(overrides, agent_config: Config, train_config: Config) -> tu
         k, v = item[0].strip(), item[1]
         target = train_items if k in train_config else agent_items if k in agent_config else None
         if target is None:
-            raise ConfigError(f"unknown config key {k!r}",
-                              f"agent keys: {sorted(agent_config)}; training keys: {sorted(train_config)}")
+            raise ConfigError(
+                f"unknown config key {k!r}",
+                f"agent keys: {sorted(agent_config)}; training keys: {sorted(train_config)}",
+            )
         target.append((k, v))
 
     def apply(cfg, pairs):

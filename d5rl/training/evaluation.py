@@ -6,8 +6,9 @@ import functools
 import json
 import sys
 import time
+from collections.abc import Callable
 from pathlib import Path
-from typing import Any, Callable
+from typing import Any
 
 import gymnasium as gym
 import jax
@@ -61,13 +62,22 @@ def evaluate(
         video_path = check_video_path(video_path)
     num_envs = max(1, min(int(num_envs), int(num_episodes)))
     render = video_path is not None
-    fns = [env_fn or env_factory(task_id, frame_stack, "rgb_array" if (render and i == 0) else None)
-           for i in range(num_envs)]
+    fns = [
+        env_fn or env_factory(task_id, frame_stack, "rgb_array" if (render and i == 0) else None)
+        for i in range(num_envs)
+    ]
     envs = [fn() for fn in fns] if not processes else None
-    vec = gym.vector.AsyncVectorEnv([functools.partial(_in_worker, fn) for fn in fns], copy=True,
-                                    context="spawn") if processes else None
-    evaluation = {"task_id": task_id, "seed": int(seed), "num_episodes": int(num_episodes),
-                  "frame_stack": int(frame_stack)}
+    vec = (
+        gym.vector.AsyncVectorEnv([functools.partial(_in_worker, fn) for fn in fns], copy=True, context="spawn")
+        if processes
+        else None
+    )
+    evaluation = {
+        "task_id": task_id,
+        "seed": int(seed),
+        "num_episodes": int(num_episodes),
+        "frame_stack": int(frame_stack),
+    }
     episodes = progress.load(evaluation) if progress is not None else []  # {"return", "length", "success", "info"}
     if episodes and render and not _video_file(video_path):
         episodes = []  # the first episode's video was not written: evaluate it again
@@ -119,8 +129,10 @@ def evaluate(
                             last[j] = _final_info(info)
                 if render and ep == 0 and not done[0]:
                     frames.append(_render(envs, vec, processes))
-            episodes += [{"return": float(ret[j]), "length": int(length[j]), "success": bool(succ[j]), "info": last[j]}
-                         for j in range(n)]
+            episodes += [
+                {"return": float(ret[j]), "length": int(length[j]), "success": bool(succ[j]), "info": last[j]}
+                for j in range(n)
+            ]
             ep += n
             if render and frames:
                 _write_video(Path(video_path), frames)
@@ -138,9 +150,14 @@ def evaluate(
         for e in envs or []:
             e.close()
     returns = [e["return"] for e in episodes]
-    out = {"return": float(np.mean(returns)), "return_std": float(np.std(returns)),
-           "length": float(np.mean([e["length"] for e in episodes])),
-           "success": float(np.mean([e["success"] for e in episodes])), "episodes": len(episodes), "returns": returns}
+    out = {
+        "return": float(np.mean(returns)),
+        "return_std": float(np.std(returns)),
+        "length": float(np.mean([e["length"] for e in episodes])),
+        "success": float(np.mean([e["success"] for e in episodes])),
+        "episodes": len(episodes),
+        "returns": returns,
+    }
     stats = [e["info"].get("episode_stats") or {} for e in episodes]
     if any(stats):
         out["stats"] = {k: float(np.mean([st[k] for st in stats if k in st])) for k in sorted(set().union(*stats))}
@@ -188,13 +205,16 @@ class EvalProgress:
             ok = ok and all(set(e) == {"return", "length", "success", "info"} for e in episodes)
             wall = float(data.get("wall_s", 0.0))  # files written before evaluations kept their time: unknown, 0
         except (OSError, ValueError, KeyError, TypeError, D5RLError) as e:
-            print(f"warning: {self.path} is damaged ({type(e).__name__}); the evaluation starts at episode 1",
-                  file=sys.stderr, flush=True)
+            print(
+                f"warning: {self.path} is damaged ({type(e).__name__}); the evaluation starts at episode 1",
+                file=sys.stderr,
+                flush=True,
+            )
             return []
         if not ok:
             return []
         self.earlier_s = wall if np.isfinite(wall) and wall > 0 else 0.0
-        return episodes[:evaluation["num_episodes"]]
+        return episodes[: evaluation["num_episodes"]]
 
     def save(self, evaluation: dict[str, Any], episodes: list[dict]) -> None:
         wall = self.earlier_s + time.monotonic() - self._since

@@ -21,12 +21,12 @@ from __future__ import annotations
 
 import dataclasses
 import json
+from collections.abc import Iterable, Mapping
 from pathlib import Path
-from typing import Any, Iterable, Mapping
+from typing import Any
 
 import jax
 import numpy as np
-from d5rl.progress import progress_bar
 
 from d5rl.agents import get_agent
 from d5rl.agents.config import Config
@@ -34,12 +34,12 @@ from d5rl.agents.encoders import is_pixel_obs
 from d5rl.datasets.dataset import mc_tail
 from d5rl.errors import D5RLError, is_int
 from d5rl.files import json_type_error, lock_holder, read_json, try_lock
+from d5rl.progress import progress_bar
 from d5rl.training.checkpoint import RUN_LOCK, Checkpoint, check_state, load_checkpoint, restore_agent, save_checkpoint
 from d5rl.training.config import check_run
 from d5rl.training.envs import load_task_dataset, make_task_env
 from d5rl.training.logger import Logger
-from d5rl.training.parts import (Evaluator, Metrics, NonFiniteLossError, Prefetcher, RunState, Sampler, as_batch,
-                                 crossed)
+from d5rl.training.parts import Evaluator, Metrics, NonFiniteLossError, Prefetcher, RunState, Sampler, as_batch, crossed
 from d5rl.training.replay import ReplayBuffer
 
 __all__ = ["NonFiniteLossError", "RunDirError", "load_run", "train"]
@@ -76,8 +76,12 @@ class Run:
         return self.agent_cls.create(seed, self.example["observations"], self.example["actions"], self.agent_cfg)
 
     def checkpoint(self, agent, state: RunState) -> None:
-        save_checkpoint(self.run_dir, Checkpoint(agent.to_bytes(), state.to_json(),
-                                                 state.buffer.state_dict() if state.buffer is not None else None))
+        save_checkpoint(
+            self.run_dir,
+            Checkpoint(
+                agent.to_bytes(), state.to_json(), state.buffer.state_dict() if state.buffer is not None else None
+            ),
+        )
 
     def buffer(self, example_obs) -> ReplayBuffer:
         """The online replay buffer (capacity: the online steps; pixels at most 20k)."""
@@ -130,33 +134,76 @@ def train(
     with try_lock(run_dir / RUN_LOCK) as locked:
         if not locked:  # two writers would delete each other's checkpoint temporaries and log every row twice
             holder = lock_holder(run_dir / RUN_LOCK)
-            raise RunDirError(f"another d5rl process{f' (pid {holder})' if holder else ''} is training into {run_dir}",
-                              "wait for it to finish (a second run resumes from its checkpoint), or pick another "
-                              "--run-dir")
+            raise RunDirError(
+                f"another d5rl process{f' (pid {holder})' if holder else ''} is training into {run_dir}",
+                "wait for it to finish (a second run resumes from its checkpoint), or pick another --run-dir",
+            )
         try:
-            return _train_locked(settings, cfg, agent_cls, agent_cfg, sampler, example, task_id, seed, offline_steps,
-                                 online_steps, run_dir, ds)
+            return _train_locked(
+                settings,
+                cfg,
+                agent_cls,
+                agent_cfg,
+                sampler,
+                example,
+                task_id,
+                seed,
+                offline_steps,
+                online_steps,
+                run_dir,
+                ds,
+            )
         except OSError as e:
             from d5rl.datasets.format import disk_full_error
 
-            full = disk_full_error(run_dir, e, "free some space or pick a --run-dir on a bigger disk, then run the "
-                                               "same command again (it resumes from the last checkpoint)")
+            full = disk_full_error(
+                run_dir,
+                e,
+                "free some space or pick a --run-dir on a bigger disk, then run the "
+                "same command again (it resumes from the last checkpoint)",
+            )
             if full is not None:
                 raise full from None
             raise
 
 
-def _train_locked(settings, cfg, agent_cls, agent_cfg, sampler, example, task_id, seed, offline_steps, online_steps,
-                  run_dir, ds) -> dict[str, Any]:
+def _train_locked(
+    settings, cfg, agent_cls, agent_cfg, sampler, example, task_id, seed, offline_steps, online_steps, run_dir, ds
+) -> dict[str, Any]:
     resume = load_checkpoint(run_dir)
-    _write_config(run_dir, settings, agent_cfg, seed, resumed=resume is not None, dataset=_data_record(ds),
-                  agent_version=agent_cls.version)
+    _write_config(
+        run_dir,
+        settings,
+        agent_cfg,
+        seed,
+        resumed=resume is not None,
+        dataset=_data_record(ds),
+        agent_version=agent_cls.version,
+    )
     logger = Logger(run_dir, tensorboard=cfg.tensorboard)
-    run = Run(task_id, seed, offline_steps, online_steps, run_dir, cfg, agent_cls, agent_cfg, sampler, example,
-              is_pixel_obs(example["observations"]), logger,
-              Evaluator(task_id, seed, cfg.frame_stack, cfg, logger, run_dir),
-              progress_bar(total=offline_steps + online_steps, unit="step", dynamic_ncols=True, smoothing=0.05,
-                   mininterval=1.0, disable=not cfg.progress))
+    run = Run(
+        task_id,
+        seed,
+        offline_steps,
+        online_steps,
+        run_dir,
+        cfg,
+        agent_cls,
+        agent_cfg,
+        sampler,
+        example,
+        is_pixel_obs(example["observations"]),
+        logger,
+        Evaluator(task_id, seed, cfg.frame_stack, cfg, logger, run_dir),
+        progress_bar(
+            total=offline_steps + online_steps,
+            unit="step",
+            dynamic_ncols=True,
+            smoothing=0.05,
+            mininterval=1.0,
+            disable=not cfg.progress,
+        ),
+    )
     agent, state = _start(run, resume)
     try:
         finished = _finished_summary(run_dir, state.step, offline_steps + online_steps)
@@ -165,8 +212,13 @@ def _train_locked(settings, cfg, agent_cls, agent_cfg, sampler, example, task_id
         agent = offline_phase(run, agent, state)
         agent = online_phase(run, agent, state)
         final = run.evaluate(agent, state, cfg.final_eval_episodes or cfg.eval_episodes)
-        summary = {"step": state.step, "run_dir": str(run_dir), **{k: v for k, v in final.items() if k != "returns"},
-                   "run_wall_s": round(state.elapsed(), 1), "resumed": resume is not None}
+        summary = {
+            "step": state.step,
+            "run_dir": str(run_dir),
+            **{k: v for k, v in final.items() if k != "returns"},
+            "run_wall_s": round(state.elapsed(), 1),
+            "resumed": resume is not None,
+        }
         (run_dir / "summary.json").write_text(json.dumps(summary, indent=2) + "\n")
         return {**summary, "agent": agent}
     finally:
@@ -218,9 +270,11 @@ def check_memory(agent_cfg: Config, example: dict) -> None:
         from d5rl.agents.config import ConfigError
 
         dims = {k: list(v) for k, v in agent_cfg.items() if k.endswith("hidden_dims")}
-        raise ConfigError(f"networks {dims} with batch_size={agent_cfg.get('batch_size')} need at least "
-                          f"{need / 2**30:,.1f} GiB; {have / 2**30:,.1f} GiB are available",
-                          "lower them with --set hidden_dims=... batch_size=...")
+        raise ConfigError(
+            f"networks {dims} with batch_size={agent_cfg.get('batch_size')} need at least "
+            f"{need / 2**30:,.1f} GiB; {have / 2**30:,.1f} GiB are available",
+            "lower them with --set hidden_dims=... batch_size=...",
+        )
 
 
 def _finished_summary(run_dir: Path, step: int, total: int) -> dict | None:
@@ -246,25 +300,41 @@ def _data_record(ds) -> dict | None:
     return {**{k: meta[k] for k in RESULT_IDENTITY_KEYS}, "episodes": int(ds.num_episodes), **source}
 
 
-def _write_config(run_dir: Path, settings, agent_cfg: Config, seed: int, resumed: bool,
-                  dataset: dict | None = None, agent_version: int = 1) -> None:
+def _write_config(
+    run_dir: Path,
+    settings,
+    agent_cfg: Config,
+    seed: int,
+    resumed: bool,
+    dataset: dict | None = None,
+    agent_version: int = 1,
+) -> None:
     """``config.json``: what this run is, including the dataset it trains on and the version of the agent's
     code (reports use both to tell results of older data or older agents apart); a resumed run must be the
     same run on the same data."""
-    resolved = {**settings.to_json(), "seed": seed, "agent": agent_cfg.to_dict(), "agent_version": agent_version,
-                **({"dataset": dataset} if dataset is not None else {})}
+    resolved = {
+        **settings.to_json(),
+        "seed": seed,
+        "agent": agent_cfg.to_dict(),
+        "agent_version": agent_version,
+        **({"dataset": dataset} if dataset is not None else {}),
+    }
     path = run_dir / "config.json"
     if resumed and path.exists():
         old = read_run_config(run_dir)
         keys = ("algo", "task_id", "seed", "agent")
-        if {k: old.get(k) for k in keys} != {k: resolved[k] for k in keys} \
-                or old.get("agent_version", 1) != agent_version:
-            raise RunDirError(f"{run_dir} holds a run with a different algorithm, task, seed, agent config or "
-                              "agent version",
-                              "pick another --run-dir, or delete that directory to start over")
+        if {k: old.get(k) for k in keys} != {k: resolved[k] for k in keys} or old.get(
+            "agent_version", 1
+        ) != agent_version:
+            raise RunDirError(
+                f"{run_dir} holds a run with a different algorithm, task, seed, agent config or agent version",
+                "pick another --run-dir, or delete that directory to start over",
+            )
         if "dataset" in old and dataset is not None and old["dataset"] != dataset:
-            raise RunDirError(f"{run_dir} holds a run trained on other data ({old['dataset']}); this one loads "
-                              f"{dataset}", "pick another --run-dir, or delete that directory to start over")
+            raise RunDirError(
+                f"{run_dir} holds a run trained on other data ({old['dataset']}); this one loads {dataset}",
+                "pick another --run-dir, or delete that directory to start over",
+            )
     path.write_text(json.dumps(resolved, indent=2) + "\n")
 
 
@@ -384,12 +454,17 @@ def read_run_config(run_dir: Path) -> dict:
     path = Path(run_dir) / "config.json"
     hint = "pass the directory a `d5rl train` run wrote, or train again in a new --run-dir"
     cfg = read_json(path, "run config", error=RunDirError, hint=hint)
-    checks = (("algo", lambda v: isinstance(v, str), "an algorithm name"),
-              ("task_id", lambda v: isinstance(v, str), "a task id"),
-              ("seed", lambda v: is_int(v, lo=0), "a non-negative integer"),
-              ("agent", lambda v: isinstance(v, dict), "an object of agent settings"),
-              ("train", lambda v: isinstance(v, dict) and is_int(v.get("frame_stack"), lo=1),
-               "an object of training settings with frame_stack"))
+    checks = (
+        ("algo", lambda v: isinstance(v, str), "an algorithm name"),
+        ("task_id", lambda v: isinstance(v, str), "a task id"),
+        ("seed", lambda v: is_int(v, lo=0), "a non-negative integer"),
+        ("agent", lambda v: isinstance(v, dict), "an object of agent settings"),
+        (
+            "train",
+            lambda v: isinstance(v, dict) and is_int(v.get("frame_stack"), lo=1),
+            "an object of training settings with frame_stack",
+        ),
+    )
     if not isinstance(cfg, dict):
         raise json_type_error("run config", path, "the file", cfg, "a JSON object", RunDirError, hint)
     for key, ok, expected in checks:
@@ -411,8 +486,10 @@ def load_run(run_dir: str | Path):
     agent_cls, agent_config_fn = get_agent(resolved["algo"])
     was = resolved.get("agent_version", 1)
     if was != agent_cls.version:  # its networks and config keys may be another version's
-        raise RunDirError(f"{run_dir} was trained by {resolved['algo']} v{was}; this d5rl's is v{agent_cls.version}",
-                          "evaluate it with the d5rl that trained it, or train it again")
+        raise RunDirError(
+            f"{run_dir} was trained by {resolved['algo']} v{was}; this d5rl's is v{agent_cls.version}",
+            "evaluate it with the d5rl that trained it, or train it again",
+        )
     cfg = Config(resolved["agent"])
     env = make_task_env(resolved["task_id"], resolved["train"]["frame_stack"])
     obs, _ = env.reset(seed=0)

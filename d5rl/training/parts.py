@@ -51,17 +51,32 @@ class RunState:
         return self.elapsed_before + time.monotonic() - self.started
 
     def to_json(self) -> dict:
-        return {"rng": self.rng.bit_generator.state, "step": self.step, "online_done": self.online_done,
-                "episode": self.episode, "online_started": self.online_started,
-                "metric_sums": dict(self.metric_sums), "metric_count": self.metric_count,
-                "elapsed_s": round(self.elapsed(), 3)}
+        return {
+            "rng": self.rng.bit_generator.state,
+            "step": self.step,
+            "online_done": self.online_done,
+            "episode": self.episode,
+            "online_started": self.online_started,
+            "metric_sums": dict(self.metric_sums),
+            "metric_count": self.metric_count,
+            "elapsed_s": round(self.elapsed(), 3),
+        }
 
     @classmethod
-    def from_json(cls, d: dict, buffer: ReplayBuffer | None = None) -> "RunState":
+    def from_json(cls, d: dict, buffer: ReplayBuffer | None = None) -> RunState:
         rng = np.random.default_rng()
         rng.bit_generator.state = d["rng"]
-        return cls(rng, d["step"], d["online_done"], d["episode"], d["online_started"], dict(d["metric_sums"]),
-                   int(d["metric_count"]), buffer, float(d.get("elapsed_s", 0.0)))  # older checkpoints: unknown, 0
+        return cls(
+            rng,
+            d["step"],
+            d["online_done"],
+            d["episode"],
+            d["online_started"],
+            dict(d["metric_sums"]),
+            int(d["metric_count"]),
+            buffer,
+            float(d.get("elapsed_s", 0.0)),
+        )  # older checkpoints: unknown, 0
 
 
 class Sampler:
@@ -126,7 +141,7 @@ class Prefetcher:
         self._pool.shutdown(wait=True, cancel_futures=True)
         self._pending.clear()
 
-    def __enter__(self) -> "Prefetcher":
+    def __enter__(self) -> Prefetcher:
         return self
 
     def __exit__(self, *exc) -> None:
@@ -134,8 +149,9 @@ class Prefetcher:
 
 
 def as_batch(b: dict, keys) -> dict:
-    return {k: b[k] if isinstance(b[k], dict) else np.asarray(b[k], np.float32 if k in FLOAT_KEYS else None)
-            for k in keys}
+    return {
+        k: b[k] if isinstance(b[k], dict) else np.asarray(b[k], np.float32 if k in FLOAT_KEYS else None) for k in keys
+    }
 
 
 class Metrics:
@@ -187,11 +203,20 @@ class Evaluator:
         video = self.run_dir / "videos" / f"step{step:09d}.mp4" if self.cfg.save_video else None
         # a kill mid-evaluation loses at most one batch of episodes: the rerun of this step's evaluation, on the
         # same agent, resumes from the file (a 100-episode IDQL evaluation is an hour of CPU)
-        progress = EvalProgress(self.run_dir / EVAL_PROGRESS_FILE,
-                                {"step": int(step), "agent_sha256": fingerprint(agent)})
-        res = evaluate(agent, self.task_id, episodes, seed=10_000 * (self.seed + 1), num_envs=self.cfg.eval_envs,
-                       frame_stack=self.frame_stack, processes=self.cfg.eval_processes, video_path=video,
-                       progress=progress)
+        progress = EvalProgress(
+            self.run_dir / EVAL_PROGRESS_FILE, {"step": int(step), "agent_sha256": fingerprint(agent)}
+        )
+        res = evaluate(
+            agent,
+            self.task_id,
+            episodes,
+            seed=10_000 * (self.seed + 1),
+            num_envs=self.cfg.eval_envs,
+            frame_stack=self.frame_stack,
+            processes=self.cfg.eval_processes,
+            video_path=video,
+            progress=progress,
+        )
         state.elapsed_before += progress.earlier_s
         row = {k: res[k] for k in ("return", "return_std", "length", "success", "score") if k in res}
         self.logger.log(step, {f"eval/{self.task_id}/{k}": v for k, v in {**row, **res.get("stats", {})}.items()})

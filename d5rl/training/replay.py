@@ -21,7 +21,9 @@ class ReplayBuffer:
     def __init__(self, example_obs, action_dim: int, capacity: int):
         self.capacity = int(capacity)
         self.dict_obs = isinstance(example_obs, dict)
-        self.obs = {k: np.empty((self.capacity,) + np.shape(v), np.asarray(v).dtype) for k, v in _leaves(example_obs).items()}
+        self.obs = {
+            k: np.empty((self.capacity,) + np.shape(v), np.asarray(v).dtype) for k, v in _leaves(example_obs).items()
+        }
         self.next_obs = {k: np.empty_like(v) for k, v in self.obs.items()}
         self.data = {
             "actions": np.empty((self.capacity, action_dim), np.float32),

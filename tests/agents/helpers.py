@@ -24,10 +24,18 @@ def small_config(name: str, **overrides):
     _, get_config = get_agent(name)
     cfg = get_config()
     small = {"batch_size": 64}
-    for k, v in (("hidden_dims", (64, 64)), ("critic_hidden_dims", (64, 64)), ("actor_hidden_dims", (64, 64)),
-                 ("hidden_dim", 64),
-                 ("num_blocks", 2), ("cql_n_actions", 4), ("num_samples", 8), ("utd_ratio", 2),
-                 ("encoder_channels", (8, 8, 8)), ("actor_ema", 0.05)):
+    for k, v in (
+        ("hidden_dims", (64, 64)),
+        ("critic_hidden_dims", (64, 64)),
+        ("actor_hidden_dims", (64, 64)),
+        ("hidden_dim", 64),
+        ("num_blocks", 2),
+        ("cql_n_actions", 4),
+        ("num_samples", 8),
+        ("utd_ratio", 2),
+        ("encoder_channels", (8, 8, 8)),
+        ("actor_ema", 0.05),
+    ):
         if k in cfg:
             small[k] = v
     small.update(overrides)

@@ -32,7 +32,7 @@ def test_every_agent_has_commented_config():
         cfg = get_config()
         assert cfg.agent_name == name
         src = inspect.getsource(inspect.getmodule(get_config))
-        body = src[src.index("def get_config"):]
+        body = src[src.index("def get_config") :]
         for line in body.splitlines():
             if "=" in line and line.strip().endswith(",") and "(" not in line.split("=")[0]:
                 key = line.strip().split("=")[0]

@@ -10,9 +10,9 @@ import pytest
 from d5rl.agents import UnknownAgentError, get_agent
 from d5rl.agents.augment import augment_observations, color_jitter, random_shift
 from d5rl.agents.config import Config, ConfigError
-from d5rl.agents.networks import Critic, Gaussian
-from d5rl.agents.encoders import ObsEncoder
 from d5rl.agents.diffusion import cosine_beta_schedule
+from d5rl.agents.encoders import ObsEncoder
+from d5rl.agents.networks import Critic, Gaussian
 
 
 def test_config_override_parses_by_default_type():
@@ -48,8 +48,9 @@ def test_gaussian_log_prob_matches_densities():
     assert float(plain.log_prob(a)[0]) == pytest.approx(expected, rel=1e-5)
     squashed = Gaussian(loc, log_std, tanh=True)
     u = np.arctanh(a_np)
-    expected_t = float(np.sum(-0.5 * ((u - loc_np) / std) ** 2 - np.log(std) - 0.5 * math.log(2 * math.pi)
-                              - np.log(1 - a_np ** 2)))
+    expected_t = float(
+        np.sum(-0.5 * ((u - loc_np) / std) ** 2 - np.log(std) - 0.5 * math.log(2 * math.pi) - np.log(1 - a_np**2))
+    )
     assert float(squashed.log_prob(a)[0]) == pytest.approx(expected_t, rel=1e-4)
     # sample_and_log_prob agrees with log_prob of its own sample
     s, lp = squashed.sample_and_log_prob(jax.random.PRNGKey(0))
@@ -68,8 +69,11 @@ def test_critic_ensemble_members_differ():
 
 def test_obs_encoder_pixels_then_proprio():
     enc = ObsEncoder(channels=(4, 4, 4), latent_dim=10)
-    obs = {"pixels/a": jnp.zeros((2, 16, 16, 9), jnp.uint8), "pixels/b": jnp.zeros((2, 16, 16, 9), jnp.uint8),
-           "proprio": jnp.arange(6.0).reshape(2, 3)}
+    obs = {
+        "pixels/a": jnp.zeros((2, 16, 16, 9), jnp.uint8),
+        "pixels/b": jnp.zeros((2, 16, 16, 9), jnp.uint8),
+        "proprio": jnp.arange(6.0).reshape(2, 3),
+    }
     params = enc.init(jax.random.PRNGKey(0), obs)
     h = enc.apply(params, obs)
     assert h.shape == (2, 13)
@@ -108,9 +112,11 @@ def test_augment_observations_is_each_camera_shifted_and_jittered_with_its_own_k
     """The jitter runs once over the cameras concatenated (for speed); per camera it must be exactly
     random_shift + color_jitter with that camera's keys, and a 4-channel camera is only shifted."""
     rng = np.random.default_rng(3)
-    obs = {"pixels/a": jnp.asarray(rng.integers(0, 256, (5, 12, 12, 9)), jnp.uint8),
-           "pixels/b": jnp.asarray(rng.integers(0, 256, (5, 12, 12, 6)), jnp.uint8),
-           "pixels/depth": jnp.asarray(rng.integers(0, 256, (5, 12, 12, 4)), jnp.uint8)}
+    obs = {
+        "pixels/a": jnp.asarray(rng.integers(0, 256, (5, 12, 12, 9)), jnp.uint8),
+        "pixels/b": jnp.asarray(rng.integers(0, 256, (5, 12, 12, 6)), jnp.uint8),
+        "pixels/depth": jnp.asarray(rng.integers(0, 256, (5, 12, 12, 4)), jnp.uint8),
+    }
     key = jax.random.PRNGKey(7)
     aug = jax.jit(augment_observations)(key, obs)
     for i, k in enumerate(sorted(obs)):
@@ -126,8 +132,10 @@ def chained_color_jitter(key, imgs, brightness=0.2, contrast=0.2, saturation=0.2
     """The jitter written step by step (same random draws as ``color_jitter``), in numpy float64."""
     kb, kc, ks, kh, kp = jax.random.split(key, 5)
     b, h, w, c = imgs.shape
-    fb, fc, fs = (np.asarray(jax.random.uniform(k, (b,), minval=1 - r, maxval=1 + r), np.float64)[:, None, None, None, None]
-                  for k, r in ((kb, brightness), (kc, contrast), (ks, saturation)))
+    fb, fc, fs = (
+        np.asarray(jax.random.uniform(k, (b,), minval=1 - r, maxval=1 + r), np.float64)[:, None, None, None, None]
+        for k, r in ((kb, brightness), (kc, contrast), (ks, saturation))
+    )
     theta = np.asarray(jax.random.uniform(kh, (b,), minval=-hue, maxval=hue), np.float64) * 2 * np.pi
     apply = np.asarray(jax.random.uniform(kp, (b,)) < p)
     x = np.asarray(imgs, np.float64).reshape(b, h, w, c // 3, 3)

@@ -42,7 +42,9 @@ def test_iql_policy_lr_decays_to_zero_over_actor_decay_steps():
         agent, _ = train(make_agent("iql", actor_decay_steps=decay_steps), dataset(), chunks=1, chunk=40)
         before = [np.array(x) for x in jax.tree_util.tree_leaves(agent.actor.params)]  # copies: update_many donates
         agent, _ = train(agent, dataset(), chunks=1, chunk=20, seed=1)
-        return any(not np.array_equal(a, np.asarray(b)) for a, b in zip(before, jax.tree_util.tree_leaves(agent.actor.params)))
+        return any(
+            not np.array_equal(a, np.asarray(b)) for a, b in zip(before, jax.tree_util.tree_leaves(agent.actor.params))
+        )
 
     assert not moved_after(40)
     assert moved_after(0)

@@ -22,12 +22,14 @@ RTOL = 2e-4
 
 def batch(seed=0):
     rng = np.random.default_rng(seed)
-    return {"observations": rng.normal(size=(B, OBS)).astype(np.float32),
-            "next_observations": rng.normal(size=(B, OBS)).astype(np.float32),
-            "actions": rng.uniform(-0.9, 0.9, (B, ACT)).astype(np.float32),
-            "rewards": rng.normal(size=B).astype(np.float32),
-            "masks": np.array([1, 1, 0, 1, 1], np.float32),
-            "mc_returns": rng.normal(size=B).astype(np.float32)}
+    return {
+        "observations": rng.normal(size=(B, OBS)).astype(np.float32),
+        "next_observations": rng.normal(size=(B, OBS)).astype(np.float32),
+        "actions": rng.uniform(-0.9, 0.9, (B, ACT)).astype(np.float32),
+        "rewards": rng.normal(size=B).astype(np.float32),
+        "masks": np.array([1, 1, 0, 1, 1], np.float32),
+        "mc_returns": rng.normal(size=B).astype(np.float32),
+    }
 
 
 def make(name, **kw):
@@ -91,7 +93,11 @@ def gaussian(p, obs, cfg, tanh_squash):
     p = P(p)
     h = mlp(p["MLP_0"], obs.astype(np.float64), len(p["MLP_0"]), activate_final=True)
     loc = h @ p["Dense_0"]["kernel"] + p["Dense_0"]["bias"]
-    log_std = h @ p["Dense_1"]["kernel"] + p["Dense_1"]["bias"] if "Dense_1" in p else np.broadcast_to(p["log_std"], loc.shape)
+    log_std = (
+        h @ p["Dense_1"]["kernel"] + p["Dense_1"]["bias"]
+        if "Dense_1" in p
+        else np.broadcast_to(p["log_std"], loc.shape)
+    )
     log_std = np.clip(log_std, cfg.log_std_min, cfg.log_std_max)
     return (loc if tanh_squash else np.tanh(loc)), log_std
 
@@ -124,8 +130,10 @@ def test_bc_loss_is_least_squares_on_a_tanh_mean_with_unit_std():
     loss, info = agent.actor_loss(agent.actor.params, b, jax.random.PRNGKey(1))
     p = P(agent.actor.params)
     assert set(p) == {"MLP_0", "Dense_0"}  # a mean head only: no std parameters
-    mean = np.tanh(mlp(p["MLP_0"], b["observations"].astype(np.float64), 2, activate_final=True)
-                   @ p["Dense_0"]["kernel"] + p["Dense_0"]["bias"])
+    mean = np.tanh(
+        mlp(p["MLP_0"], b["observations"].astype(np.float64), 2, activate_final=True) @ p["Dense_0"]["kernel"]
+        + p["Dense_0"]["bias"]
+    )
     sq = ((mean - b["actions"]) ** 2).sum(-1)
     close(loss, (0.5 * sq + 0.5 * ACT * math.log(2 * math.pi)).mean())
     close(info["actor/mse"], sq.mean())
@@ -163,8 +171,10 @@ def test_bc_learning_rate_follows_the_release_cosine():
         agent, b = make("bc", actor_lr=1e-3, actor_decay_steps=steps), batch()
         once = agent.update(b)[0]
         twice = once.update(b)[0]
-        moved = any(np.abs(np.asarray(x) - np.asarray(y)).max() > 0 for x, y in
-                    zip(jax.tree_util.tree_leaves(once.actor.params), jax.tree_util.tree_leaves(twice.actor.params)))
+        moved = any(
+            np.abs(np.asarray(x) - np.asarray(y)).max() > 0
+            for x, y in zip(jax.tree_util.tree_leaves(once.actor.params), jax.tree_util.tree_leaves(twice.actor.params))
+        )
         assert moved == moves, steps
 
 
@@ -184,8 +194,9 @@ def test_iql_value_and_critic_losses(name):
 def test_iql_actor_loss_is_advantage_weighted_regression():
     agent, b = make("iql", temperature=3.0, max_weight=2.0), batch()
     loss, _ = agent.actor_loss(agent.actor.params, b, jax.random.PRNGKey(2))
-    adv = critic(agent.target_critic_params, b["observations"], b["actions"]).min(0) - value(agent.value.params,
-                                                                                            b["observations"])
+    adv = critic(agent.target_critic_params, b["observations"], b["actions"]).min(0) - value(
+        agent.value.params, b["observations"]
+    )
     w = np.minimum(np.exp(3.0 * adv), 2.0)
     loc, log_std = gaussian(agent.actor.params, b["observations"], agent.config, tanh_squash=False)
     close(loss, -(w * normal_logp(loc, log_std, b["actions"])).mean())
@@ -198,10 +209,15 @@ def test_idql_takes_two_actor_steps_per_critic_step():
 
     agent = make("idql", critic_hidden_dims=(8, 8), hidden_dim=8, num_blocks=1, batch_size=6, augment=False)
     rng = np.random.default_rng(3)
-    b = {**batch(), "observations": rng.normal(size=(6, OBS)).astype(np.float32),
-         "next_observations": rng.normal(size=(6, OBS)).astype(np.float32),
-         "actions": rng.uniform(-0.9, 0.9, (6, ACT)).astype(np.float32), "rewards": np.ones(6, np.float32),
-         "masks": np.ones(6, np.float32), "mc_returns": np.zeros(6, np.float32)}
+    b = {
+        **batch(),
+        "observations": rng.normal(size=(6, OBS)).astype(np.float32),
+        "next_observations": rng.normal(size=(6, OBS)).astype(np.float32),
+        "actions": rng.uniform(-0.9, 0.9, (6, ACT)).astype(np.float32),
+        "rewards": np.ones(6, np.float32),
+        "masks": np.ones(6, np.float32),
+        "mc_returns": np.zeros(6, np.float32),
+    }
     new, _ = agent.update(b)
     _, _, k1, k2 = jax.random.split(agent.rng, 4)
     actor, ema = agent.actor, agent.target_actor_params
@@ -209,8 +225,10 @@ def test_idql_takes_two_actor_steps_per_critic_step():
         g, _ = jax.grad(agent.actor_loss, has_aux=True)(actor.params, part, key)
         actor = actor.apply_gradients(grads=g)
         ema = soft_update(ema, actor.params, agent.config.actor_ema)
-    for got, want in zip(jax.tree_util.tree_leaves((new.actor.params, new.target_actor_params)),
-                         jax.tree_util.tree_leaves((actor.params, ema))):
+    for got, want in zip(
+        jax.tree_util.tree_leaves((new.actor.params, new.target_actor_params)),
+        jax.tree_util.tree_leaves((actor.params, ema)),
+    ):
         np.testing.assert_allclose(np.asarray(got), np.asarray(want), rtol=1e-5, atol=1e-7)
     assert int(new.actor.step) == 2 and int(new.critic.step) == 1
 
@@ -235,8 +253,9 @@ def test_cql_critic_loss(name, form):
     the best of n actions of π(s') (max-Q backup); paper: π(s') actions in the log-sum-exp too, one-sample
     TD target."""
     release = form == "release"
-    agent = make(name, cql_n_actions=3, cql_alpha=2.0, discount=0.9, cql_next_actions=not release,
-                 cql_max_target_backup=release)
+    agent = make(
+        name, cql_n_actions=3, cql_alpha=2.0, discount=0.9, cql_next_actions=not release, cql_max_target_backup=release
+    )
     b, key = batch(), jax.random.PRNGKey(3)
     loss, info = agent.critic_loss(agent.critic.params, b, key)
     cfg, n = agent.config, 3
@@ -312,8 +331,17 @@ def test_td3bc_losses():
 def test_td3bc_pixel_form_of_the_release():
     """jaxrl2's pixel TD3+BC as the release runs it: a clipped linear actor, the target action a sample of the
     unit-std Gaussian around it plus noise 0.1 clipped at 0.5, and the actor's Q the mean of both critics."""
-    agent = make("td3bc", alpha=2.0, discount=0.9, policy_noise=0.1, noise_clip=0.5, target_policy_std=1.0,
-                 actor_output="clip", actor_q="mean", policy_freq=1)
+    agent = make(
+        "td3bc",
+        alpha=2.0,
+        discount=0.9,
+        policy_noise=0.1,
+        noise_clip=0.5,
+        target_policy_std=1.0,
+        actor_output="clip",
+        actor_q="mean",
+        policy_freq=1,
+    )
     b, key = batch(), jax.random.PRNGKey(6)
 
     def actor(params, obs):  # the linear head, clipped (no tanh)
@@ -339,11 +367,22 @@ def test_td3bc_pixel_settings_are_the_release_form():
 
     for task in ("kitchen-standard-mixed-v0", "wx-sorting-v0"):
         c = resolve("td3bc", task).agent
-        assert (c.actor_output, c.target_policy_std, c.policy_noise, c.noise_clip, c.policy_freq, c.actor_q) == \
-            ("clip", 1.0, 0.1, 0.5, 1, "mean"), task
+        assert (c.actor_output, c.target_policy_std, c.policy_noise, c.noise_clip, c.policy_freq, c.actor_q) == (
+            "clip",
+            1.0,
+            0.1,
+            0.5,
+            1,
+            "mean",
+        ), task
     c = resolve("td3bc", "kitchen-standard-mixed-state-v0").agent  # the TD3+BC authors' form for states
-    assert (c.actor_output, c.target_policy_std, c.policy_noise, c.policy_freq, c.actor_q) == ("tanh", 0.0, 0.2, 2,
-                                                                                                "first")
+    assert (c.actor_output, c.target_policy_std, c.policy_noise, c.policy_freq, c.actor_q) == (
+        "tanh",
+        0.0,
+        0.2,
+        2,
+        "first",
+    )
 
 
 # --- ReBRAC ------------------------------------------------------------------------------------------------
@@ -380,8 +419,9 @@ def test_fql_losses():
     key = jax.random.PRNGKey(9)
     z = np.asarray(jax.random.normal(key, (B, ACT)), np.float64)
     a_next = np.clip(field(agent.actor.params, b["next_observations"], z), -1, 1)
-    target = b["rewards"] + 0.9 * b["masks"] * critic(agent.target_critic_params, b["next_observations"], a_next,
-                                                     ln=True).mean(0)
+    target = b["rewards"] + 0.9 * b["masks"] * critic(
+        agent.target_critic_params, b["next_observations"], a_next, ln=True
+    ).mean(0)
     qs = critic(agent.critic.params, b["observations"], b["actions"], ln=True)
     close(agent.critic_loss(agent.critic.params, b, key)[0], ((qs - target) ** 2).mean())
     # behaviour flow: flow matching from z to the data's action

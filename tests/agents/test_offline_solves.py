@@ -8,8 +8,8 @@ policy from the same data in 1,500 updates.
 import numpy as np
 import pytest
 
-from d5rl.training.evaluation import evaluate
 from d5rl.envs.toy.data import toy_dataset
+from d5rl.training.evaluation import evaluate
 from tests.agents.helpers import make_agent, train
 
 OVERRIDES = {
@@ -18,7 +18,9 @@ OVERRIDES = {
     "cql": {"cql_alpha": 1.0, "init_temperature": 0.1, "actor_lr": 3e-4},
     "td3bc": {},
     "rebrac": {},
-    "fql": {"alpha": 1.0},  # this data is 80% random actions: a weak pull to the behaviour flow (FQL tunes alpha per task)
+    "fql": {
+        "alpha": 1.0
+    },  # this data is 80% random actions: a weak pull to the behaviour flow (FQL tunes alpha per task)
 }
 
 

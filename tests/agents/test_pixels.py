@@ -75,7 +75,7 @@ def test_pixel_td3bc_host_schedule_matches_the_in_program_one():
     b = pixel_batch(16)
     agent = make_agent("td3bc", _DS["ds"], batch_size=8)
     agent = type(agent).create(0, b["observations"], b["actions"], agent.config)
-    batches = [jax.tree_util.tree_map(lambda x, i=i: x[8 * i:8 * (i + 1)], b) for i in range(2)]
+    batches = [jax.tree_util.tree_map(lambda x, i=i: x[8 * i : 8 * (i + 1)], b) for i in range(2)]
     one_by_one = agent
     for batch in batches:
         one_by_one, _ = one_by_one.update(batch)

@@ -9,8 +9,9 @@ def test_rlpd_utd_does_utd_critic_updates_per_call():
     b = batch(dataset(), 64, np.random.default_rng(0))
     agent, m = agent.update(b)
     assert int(agent.critic.step) == 4 and int(agent.actor.step) == 1 and int(agent.temp.step) == 1
-    assert np.asarray(agent.critic.apply_fn({"params": agent.critic.params}, b["observations"][:3],
-                                            b["actions"][:3])).shape == (10, 3)
+    assert np.asarray(
+        agent.critic.apply_fn({"params": agent.critic.params}, b["observations"][:3], b["actions"][:3])
+    ).shape == (10, 3)
 
 
 def test_rlpd_critic_loss_falls_and_temperature_moves():

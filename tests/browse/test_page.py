@@ -22,15 +22,25 @@ import pytest
 
 IN_CI = os.environ.get("CI", "").lower() == "true"
 CHROMIUM = shutil.which("chromium") or shutil.which("chromium-browser")
-CHROMIUM_ARGS = ["--headless", "--no-sandbox", "--disable-gpu", "--disable-quic", "--no-first-run",
-                 "--disable-background-networking", "--disable-component-update", "--disable-sync"]
+CHROMIUM_ARGS = [
+    "--headless",
+    "--no-sandbox",
+    "--disable-gpu",
+    "--disable-quic",
+    "--no-first-run",
+    "--disable-background-networking",
+    "--disable-component-update",
+    "--disable-sync",
+]
 
 if not IN_CI:
     pytest.importorskip("playwright.sync_api")
     pytest.importorskip("uvicorn")
     if CHROMIUM is None:
-        pytest.skip("Chromium is not installed (apt-get install chromium); CI installs it and runs this test",
-                    allow_module_level=True)
+        pytest.skip(
+            "Chromium is not installed (apt-get install chromium); CI installs it and runs this test",
+            allow_module_level=True,
+        )
 elif CHROMIUM is None:
     raise RuntimeError("CI=true but no chromium on PATH: .ci/run must `apt-get install chromium`")
 
@@ -65,8 +75,12 @@ class Server:
 
 def browser(playwright, tmp_path):
     return playwright.chromium.launch_persistent_context(
-        str(tmp_path / "chromium-profile"), executable_path=CHROMIUM, headless=True, args=CHROMIUM_ARGS,
-        viewport={"width": 1200, "height": 900})
+        str(tmp_path / "chromium-profile"),
+        executable_path=CHROMIUM,
+        headless=True,
+        args=CHROMIUM_ARGS,
+        viewport={"width": 1200, "height": 900},
+    )
 
 
 def shot(page, name):
@@ -153,8 +167,9 @@ def _grid(root: Path, cells) -> Path:
         d = cell.directory(root)
         write_cell_file(cell, d)
         steps = range(100 - 50 * (len(scores) - 1), 101, 50)
-        (d / "metrics.jsonl").write_text("".join(json.dumps({"step": st, "eval/a1-walk-v0/score": sc}) + "\n"
-                                                 for st, sc in zip(steps, scores)))
+        (d / "metrics.jsonl").write_text(
+            "".join(json.dumps({"step": st, "eval/a1-walk-v0/score": sc}) + "\n" for st, sc in zip(steps, scores))
+        )
         (d / "done").write_text("{}")
     return root
 
@@ -166,17 +181,26 @@ def test_runs_view_compares_agents_with_the_paper_as_the_reports_do(tmp_path):
     from d5rl.runner.report import seed_interval, write_report
     from tests.mdtables import report_entries
 
-    grids = {"g1/cells": _grid(tmp_path / "g1/cells", [("bc", 0, [0.5]), ("bc", 1, [0.7]),
-                                                      ("iql", 0, [0.2, 0.8]), ("iql", 1, [0.4, 0.9])]),
-             "g2/cells": _grid(tmp_path / "g2/cells", [("bc", 0, [0.1]), ("bc", 1, [0.2]), ("bc", 2, [0.3])])}
+    grids = {
+        "g1/cells": _grid(
+            tmp_path / "g1/cells", [("bc", 0, [0.5]), ("bc", 1, [0.7]), ("iql", 0, [0.2, 0.8]), ("iql", 1, [0.4, 0.9])]
+        ),
+        "g2/cells": _grid(tmp_path / "g2/cells", [("bc", 0, [0.1]), ("bc", 1, [0.2]), ("bc", 2, [0.3])]),
+    }
     reports = {k: report_entries(write_report(g, plots=False).read_text()) for k, g in grids.items()}
     with runs_page(tmp_path, list(grids.values())) as page:
         section = page.locator(RUNS_SECTION)
         section.locator(".dots .main-svg").first.wait_for()
         table = section.locator('table.compare[data-phase="offline"]')
         head = table.locator("th").all_inner_texts()
-        assert [h.rstrip(" ▲▼") for h in head] == ["agent", "steps", "seeds", "mean ± std", "95% CI of the mean",
-                                                  "paper (a1-walk-v0)"]
+        assert [h.rstrip(" ▲▼") for h in head] == [
+            "agent",
+            "steps",
+            "seeds",
+            "mean ± std",
+            "95% CI of the mean",
+            "paper (a1-walk-v0)",
+        ]
         rows = [r.locator("td").all_inner_texts() for r in table.locator("tr[data-algo]").all()]
         assert [r[0] for r in rows] == ["g1/cells: IQL", "g1/cells: BC", "g2/cells: BC"]  # best mean first
         for label, _, _, ours, _, paper in rows:
@@ -189,20 +213,28 @@ def test_runs_view_compares_agents_with_the_paper_as_the_reports_do(tmp_path):
         assert "g1/cells: IQL" in table.locator("tr.best").inner_text()
 
         table.locator('th[data-col="mean ± std"]').click()  # ascending
-        assert [r.split("\t")[0] for r in table.locator("tr[data-algo]").all_inner_texts()] == \
-            ["g2/cells: BC", "g1/cells: BC", "g1/cells: IQL"]
+        assert [r.split("\t")[0] for r in table.locator("tr[data-algo]").all_inner_texts()] == [
+            "g2/cells: BC",
+            "g1/cells: BC",
+            "g1/cells: IQL",
+        ]
         table.locator('th[data-col="agent"]').click()
-        assert [r.split("\t")[0] for r in table.locator("tr[data-algo]").all_inner_texts()] == \
-            ["g1/cells: BC", "g1/cells: IQL", "g2/cells: BC"]
+        assert [r.split("\t")[0] for r in table.locator("tr[data-algo]").all_inner_texts()] == [
+            "g1/cells: BC",
+            "g1/cells: IQL",
+            "g2/cells: BC",
+        ]
 
         curves = section.locator(".plot.curve")
-        assert curves.evaluate("d => d.data.filter(t => t.name).map(t => [t.name, t.x])") == \
-            [["g1/cells: IQL (2 seeds)", [50, 100]]]
+        assert curves.evaluate("d => d.data.filter(t => t.name).map(t => [t.name, t.x])") == [
+            ["g1/cells: IQL (2 seeds)", [50, 100]]
+        ]
         dots = section.locator(".plot.dots")
         assert dots.evaluate("d => d.data.map(t => [t.name, t.y, t.x])") == [
             ["g1/cells: BC", ["g1/cells: BC"] * 2, [0.5, 0.7]],
             ["g2/cells: BC", ["g2/cells: BC"] * 3, [0.1, 0.2, 0.3]],
-            ["paper's mean", ["g1/cells: BC", "g2/cells: BC"], [1.006, 1.006]]]
+            ["paper's mean", ["g1/cells: BC", "g2/cells: BC"], [1.006, 1.006]],
+        ]
         # Plotly's tool bar shows at the top right on hover: it must not cover a plot's title
         for plot in (curves, dots):
             plot.hover()

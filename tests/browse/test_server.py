@@ -13,17 +13,17 @@ import pytest
 
 pytest.importorskip("starlette")
 pytest.importorskip("httpx")
-from PIL import Image  # noqa: E402
-from starlette.testclient import TestClient  # noqa: E402
+from PIL import Image
+from starlette.testclient import TestClient
 
-from d5rl import paths  # noqa: E402
-from d5rl.browse.server import create_app  # noqa: E402
-from d5rl.datasets.generation import generate  # noqa: E402
-from d5rl.datasets.loading import load_dataset  # noqa: E402
-from d5rl.registry import get_spec, normalize_score  # noqa: E402
-from d5rl.runner.execute import write_cell_file  # noqa: E402
-from d5rl.runner.grid import Cell  # noqa: E402
-from tests.browse import toy  # noqa: E402
+from d5rl import paths
+from d5rl.browse.server import create_app
+from d5rl.datasets.generation import generate
+from d5rl.datasets.loading import load_dataset
+from d5rl.registry import get_spec, normalize_score
+from d5rl.runner.execute import write_cell_file
+from d5rl.runner.grid import Cell
+from tests.browse import toy
 
 
 def client(runs=()):
@@ -34,8 +34,12 @@ def tiles(png: bytes, layout: dict) -> np.ndarray:
     """The frames of a strip, back as (n, h, w, 3)."""
     img = np.asarray(Image.open(io.BytesIO(png)).convert("RGB"))
     h, w, cols = layout["height"], layout["width"], layout["cols"]
-    return np.stack([img[(k // cols) * h:(k // cols + 1) * h, (k % cols) * w:(k % cols + 1) * w]
-                     for k in range(layout["frames"])])
+    return np.stack(
+        [
+            img[(k // cols) * h : (k // cols + 1) * h, (k % cols) * w : (k % cols + 1) * w]
+            for k in range(layout["frames"])
+        ]
+    )
 
 
 @pytest.fixture
@@ -161,8 +165,9 @@ def _run_dir(root: Path) -> Path:
 def test_runs_curves_tables_and_videos(tmp_path):
     run = _run_dir(tmp_path / "run")
     c = client([run])
-    assert c.get("/api/tasks").json()["runs"] == [{"index": 0, "name": "run", "label": "run",
-                                                   "path": str(run.resolve())}]
+    assert c.get("/api/tasks").json()["runs"] == [
+        {"index": 0, "name": "run", "label": "run", "path": str(run.resolve())}
+    ]
     body = c.get("/api/runs/0").json()
     (curve,) = body["curves"]
     assert curve["steps"] == [50, 100] and curve["seeds"] == 2
@@ -189,19 +194,36 @@ def test_requests_cannot_leave_the_allowed_directories(tmp_path, toy_data):
     (run / "link.mp4").symlink_to(secret)
     (run / "toy-reach-v0" / "linkdir").symlink_to(tmp_path, target_is_directory=True)
     c = client([run])
-    for path in ["../secret.mp4", "%2e%2e/secret.mp4", "..%2fsecret.mp4", "%2E%2E%2Fsecret.mp4",
-                 "toy-reach-v0/..%2F..%2Fsecret.mp4", "link.mp4", "toy-reach-v0/linkdir/secret.mp4",
-                 str(secret), "%2F" + str(secret).lstrip("/"), "/" + str(secret),
-                 "toy-reach-v0/bc/seed0/cell.json", "toy-reach-v0/bc/seed0/videos/final.mp4%00.json"]:
+    for path in [
+        "../secret.mp4",
+        "%2e%2e/secret.mp4",
+        "..%2fsecret.mp4",
+        "%2E%2E%2Fsecret.mp4",
+        "toy-reach-v0/..%2F..%2Fsecret.mp4",
+        "link.mp4",
+        "toy-reach-v0/linkdir/secret.mp4",
+        str(secret),
+        "%2F" + str(secret).lstrip("/"),
+        "/" + str(secret),
+        "toy-reach-v0/bc/seed0/cell.json",
+        "toy-reach-v0/bc/seed0/videos/final.mp4%00.json",
+    ]:
         r = c.get(f"/api/runs/0/files/{path}")
         assert r.status_code in (403, 404) and b"TOP-SECRET" not in r.content, (path, r.status_code)
-    for url in ["/api/tasks/..%2F..%2Fetc/episodes/0", "/api/tasks/%2e%2e/overview",
-                "/api/tasks/toy-reach-pixels-v0/episodes/0/frames/..%2F..%2Fmanifest.json",
-                "/api/tasks/toy-reach-pixels-v0/episodes/0/frames/%2e%2e%2f%2e%2e%2fframes.json",
-                "/api/tasks/toy-reach-pixels-v0/episodes/-1", "/api/tasks/toy-reach-pixels-v0/episodes/99999999999",
-                "/api/tasks/toy-reach-pixels-v0/episodes/50", "/api/datacards/..%2F..%2FREADME.md",
-                "/api/datacards/%2e%2e%2fREADME.md", "/static/..%2F..%2Fcli.py", "/static/%2e%2e/server.py",
-                "/api/runs/..%2F..%2F/files/x.mp4"]:
+    for url in [
+        "/api/tasks/..%2F..%2Fetc/episodes/0",
+        "/api/tasks/%2e%2e/overview",
+        "/api/tasks/toy-reach-pixels-v0/episodes/0/frames/..%2F..%2Fmanifest.json",
+        "/api/tasks/toy-reach-pixels-v0/episodes/0/frames/%2e%2e%2f%2e%2e%2fframes.json",
+        "/api/tasks/toy-reach-pixels-v0/episodes/-1",
+        "/api/tasks/toy-reach-pixels-v0/episodes/99999999999",
+        "/api/tasks/toy-reach-pixels-v0/episodes/50",
+        "/api/datacards/..%2F..%2FREADME.md",
+        "/api/datacards/%2e%2e%2fREADME.md",
+        "/static/..%2F..%2Fcli.py",
+        "/static/%2e%2e/server.py",
+        "/api/runs/..%2F..%2F/files/x.mp4",
+    ]:
         r = c.get(url)
         assert r.status_code in (400, 403, 404), (url, r.status_code)
         assert b"import " not in r.content and b"d5rl:" not in r.content
@@ -227,11 +249,14 @@ def test_safe_paths_resolve_before_checking(tmp_path):
         file_under(root, "a/l.mp4", (".mp4",))
 
 
-@pytest.mark.parametrize("host, port, needle", [
-    ("127.0.0.1", 70000, "--port must be from 1 to 65535, got 70000"),
-    ("127.0.0.1", 0, "--port must be from 1 to 65535, got 0"),
-    ("256.1.1.1", 8765, "pass an address of this machine with --host"),
-])
+@pytest.mark.parametrize(
+    "host, port, needle",
+    [
+        ("127.0.0.1", 70000, "--port must be from 1 to 65535, got 70000"),
+        ("127.0.0.1", 0, "--port must be from 1 to 65535, got 0"),
+        ("256.1.1.1", 8765, "pass an address of this machine with --host"),
+    ],
+)
 def test_serve_refuses_a_bad_port_or_host_in_one_line(host, port, needle):
     from d5rl.browse.server import serve
     from d5rl.errors import D5RLError
@@ -251,9 +276,20 @@ def test_run_labels_tell_grids_apart(tmp_path):
     assert run_labels([a, a]) == ["table1-state/cells", "table1-state/cells #2"]
 
 
-@pytest.mark.parametrize("host, ok", [("localhost:8765", True), ("127.0.0.1:8765", True), ("[::1]:8765", True),
-                                      ("192.168.1.7", True), ("browse-host.example", True), ("evil.example", False),
-                                      ("evil.example:8765", False), ("localhost.evil.example", False), ("", False)])
+@pytest.mark.parametrize(
+    "host, ok",
+    [
+        ("localhost:8765", True),
+        ("127.0.0.1:8765", True),
+        ("[::1]:8765", True),
+        ("192.168.1.7", True),
+        ("browse-host.example", True),
+        ("evil.example", False),
+        ("evil.example:8765", False),
+        ("localhost.evil.example", False),
+        ("", False),
+    ],
+)
 def test_only_requests_naming_this_server_are_answered(host, ok):
     """DNS rebinding: a page on evil.example points its name at 127.0.0.1 and reads the server from the
     user's browser, with ``Host: evil.example``."""

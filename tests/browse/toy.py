@@ -77,17 +77,38 @@ def renders(spec, root, manifest, *, episodes, workers=None, progress=True, size
         return []
     from d5rl.datasets.render_cache import ensure_render_cache
 
-    return [ensure_render_cache(root, manifest, "tests.browse.toy:render_episode", {"size": int(size)},
-                                name=f"cam-{size}", episodes=episodes, workers=workers, progress=progress)]
+    return [
+        ensure_render_cache(
+            root,
+            manifest,
+            "tests.browse.toy:render_episode",
+            {"size": int(size)},
+            name=f"cam-{size}",
+            episodes=episodes,
+            workers=workers,
+            progress=progress,
+        )
+    ]
 
 
 def _register(name, derived, observation):
-    return register(TaskSpec(
-        id=f"test-{name}-v0", entry_point="tests.browse.toy:StateEnv", max_episode_steps=10,
-        description="browse test task",
-        dataset=DatasetSpec(name=f"test-{name}", version=1, generator="tests.browse.toy:Generator", num_episodes=6,
-                            episodes_per_shard=3, derived=derived),
-        observation=observation))
+    return register(
+        TaskSpec(
+            id=f"test-{name}-v0",
+            entry_point="tests.browse.toy:StateEnv",
+            max_episode_steps=10,
+            description="browse test task",
+            dataset=DatasetSpec(
+                name=f"test-{name}",
+                version=1,
+                generator="tests.browse.toy:Generator",
+                num_episodes=6,
+                episodes_per_shard=3,
+                derived=derived,
+            ),
+            observation=observation,
+        )
+    )
 
 
 ENV_TASK = _register("browseenv", None, "state").id

@@ -56,8 +56,10 @@ def test_shard_writer_stores_compressed_frames_and_reads_them_back(tmp_path):
     cw.append(frames[:12])
     cw.append(frames[12:])
     w.write("states", np.zeros((30, 2)))
-    rec = w.commit({"episodes": [0, 1], "episode_lengths": [29], "episode_meta": [{}]},
-                   {"observations/pixels/cam": "step", "states": "step"})
+    rec = w.commit(
+        {"episodes": [0, 1], "episode_lengths": [29], "episode_meta": [{}]},
+        {"observations/pixels/cam": "step", "states": "step"},
+    )
     info = rec["arrays"]["observations/pixels/cam"]
     assert info["encoding"] == chunks.ENCODING and info["file"].endswith(".zch") and info["shape"] == [30, 12, 12, 3]
     d = tmp_path / "shard-00000"
@@ -96,10 +98,19 @@ def test_sampling_compressed_frames_equals_sampling_raw_frames(tmp_path):
     chunks.compress_array(tmp_path / "f.zch", frames, segments, chunk_rows=4)
     n = sum(lengths)
     rng = np.random.default_rng(0)
-    common = {"actions": rng.normal(size=(n, 2)).astype(np.float32), "rewards": np.zeros(n, np.float32),
-              "terminals": np.zeros(n, bool), "timeouts": np.zeros(n, bool)}
-    aligns = {"actions": "transition", "rewards": "transition", "terminals": "transition",
-              "timeouts": "transition", "observations/pixels/cam": "step"}
+    common = {
+        "actions": rng.normal(size=(n, 2)).astype(np.float32),
+        "rewards": np.zeros(n, np.float32),
+        "terminals": np.zeros(n, bool),
+        "timeouts": np.zeros(n, bool),
+    }
+    aligns = {
+        "actions": "transition",
+        "rewards": "transition",
+        "terminals": "transition",
+        "timeouts": "transition",
+        "observations/pixels/cam": "step",
+    }
     raw = Dataset({**common, "observations/pixels/cam": frames}, aligns, np.array(lengths))
     comp = chunks.CompressedArray(tmp_path / "f.zch")
     split = ChunkedArray([comp.head(10), frames[10:]])  # a compressed shard followed by a raw one

@@ -13,8 +13,8 @@ from d5rl.datasets import format as fmt
 from d5rl.datasets.generation import dataset_root, generate
 from d5rl.datasets.loading import load_dataset
 from d5rl.datasets.verify import verify_dataset
-from d5rl.files import dump_json
 from d5rl.errors import DatasetCorruptError, DatasetNotFoundError, DatasetVersionError
+from d5rl.files import dump_json
 from tests.datasets.toy import register_toy
 
 REPO = Path(__file__).resolve().parents[2]
@@ -24,7 +24,8 @@ def tree_digest(root: Path) -> dict[str, str]:
     """sha256 of every data file; dotfiles are bookkeeping (locks, verification stamps), not data."""
     return {
         str(p.relative_to(root)): hashlib.sha256(p.read_bytes()).hexdigest()
-        for p in sorted(root.rglob("*")) if p.is_file() and not p.name.startswith(".")
+        for p in sorted(root.rglob("*"))
+        if p.is_file() and not p.name.startswith(".")
     }
 
 
@@ -65,8 +66,13 @@ def test_run_jobs_reports_progress_and_keeps_job_order():
     from d5rl import parallel
 
     got, finished = [], []
-    out = parallel.run_jobs(_square_and_report, [(i,) for i in range(5)], workers=2,
-                            on_message=got.append, on_result=lambda i, r: finished.append(i))
+    out = parallel.run_jobs(
+        _square_and_report,
+        [(i,) for i in range(5)],
+        workers=2,
+        on_message=got.append,
+        on_result=lambda i, r: finished.append(i),
+    )
     assert out == [0, 1, 4, 9, 16]
     assert sorted(got) == [0, 1, 2, 3, 4] and sorted(finished) == [0, 1, 2, 3, 4]
 
@@ -221,16 +227,20 @@ def _run_script(tmp_path, text: str, timeout: float = 90):
     script = tmp_path / "script.py"
     script.write_text(text)
     env = {**os.environ, "D5RL_HOME": str(tmp_path / "home"), "PYTHONPATH": str(REPO)}
-    return subprocess.run([sys.executable, str(script)], env=env, cwd=tmp_path, capture_output=True, text=True,
-                          timeout=timeout)
+    return subprocess.run(
+        [sys.executable, str(script)], env=env, cwd=tmp_path, capture_output=True, text=True, timeout=timeout
+    )
 
 
 def test_a_script_without_the_main_guard_generates_several_shards_in_a_pool(tmp_path):
     # spawn workers re-run the main script unless told otherwise: here that would call load_dataset
     # again in each worker, which waits for the parent's write lock while the parent waits for it.
-    proc = _run_script(tmp_path, "import d5rl\n"
-                       "ds = d5rl.load_dataset('toy-reach-v0', episodes=120, workers=2, progress=False)\n"
-                       "print('episodes', ds.num_episodes)\n")
+    proc = _run_script(
+        tmp_path,
+        "import d5rl\n"
+        "ds = d5rl.load_dataset('toy-reach-v0', episodes=120, workers=2, progress=False)\n"
+        "print('episodes', ds.num_episodes)\n",
+    )
     assert proc.returncode == 0, proc.stderr
     assert "episodes 120" in proc.stdout
     assert len(list((tmp_path / "home/datasets/toy-reach").glob("v*/shards/shard-*"))) == 3
@@ -238,14 +248,17 @@ def test_a_script_without_the_main_guard_generates_several_shards_in_a_pool(tmp_
 
 def test_a_script_without_the_guard_whose_jobs_need_it_stops_with_the_guard_named(tmp_path):
     # A generator defined in the script itself: the workers must re-run the script to find it.
-    proc = _run_script(tmp_path, "import d5rl\n"
-                       "from tests.datasets.toy import ToyGenerator, register_toy\n"
-                       "class ScriptGenerator(ToyGenerator):\n    pass\n"
-                       "import dataclasses\n"
-                       "spec = register_toy('noguard', num_episodes=12, per_shard=4)\n"
-                       "spec = dataclasses.replace(spec, dataset=dataclasses.replace(\n"
-                       "    spec.dataset, generator='__main__:ScriptGenerator'))\n"
-                       "d5rl.load_dataset(spec, workers=2, progress=False)\n")
+    proc = _run_script(
+        tmp_path,
+        "import d5rl\n"
+        "from tests.datasets.toy import ToyGenerator, register_toy\n"
+        "class ScriptGenerator(ToyGenerator):\n    pass\n"
+        "import dataclasses\n"
+        "spec = register_toy('noguard', num_episodes=12, per_shard=4)\n"
+        "spec = dataclasses.replace(spec, dataset=dataclasses.replace(\n"
+        "    spec.dataset, generator='__main__:ScriptGenerator'))\n"
+        "d5rl.load_dataset(spec, workers=2, progress=False)\n",
+    )
     assert proc.returncode != 0
     assert 'if __name__ == "__main__":' in proc.stderr
     assert "Traceback" not in proc.stderr.split("d5rl: error:")[0]

@@ -20,6 +20,7 @@ from d5rl.datasets.generation import dataset_root, generate
 from d5rl.datasets.loading import load_dataset
 from d5rl.datasets.verify import verify_dataset
 from d5rl.errors import DatasetCorruptError, DatasetVersionError
+from d5rl.files import JSON_MAX_BYTES
 from tests.datasets.test_generation import tree_digest
 from tests.datasets.toy import register_toy
 
@@ -34,8 +35,15 @@ def flip(path: Path, offset: int = -3) -> None:
 
 def toy_cli(name, episodes, delay, *args, **popen):
     cmd = [sys.executable, "-m", "tests.datasets.toy", "cli", name, str(episodes), str(delay), "--", *args]
-    return subprocess.Popen(cmd, cwd=REPO, env={**os.environ, "PYTHONPATH": str(REPO), **popen.pop("env", {})},
-                            stdout=subprocess.PIPE, stderr=subprocess.PIPE, text=True, **popen)
+    return subprocess.Popen(
+        cmd,
+        cwd=REPO,
+        env={**os.environ, "PYTHONPATH": str(REPO), **popen.pop("env", {})},
+        stdout=subprocess.PIPE,
+        stderr=subprocess.PIPE,
+        text=True,
+        **popen,
+    )
 
 
 def _alive(pid: int) -> bool:
@@ -202,8 +210,17 @@ def _wait_for(pred, timeout=60.0):
 def test_ctrl_c_returns_fast_and_leaves_only_complete_shards(tmp_path):
     pids = tmp_path / "pids"
     pids.mkdir()
-    proc = toy_cli("ctrlc", 60, 0.3, "generate", "test-ctrlc-v0", "--workers", "2",
-                   env={"D5RL_TOY_PIDS": str(pids)}, start_new_session=True)
+    proc = toy_cli(
+        "ctrlc",
+        60,
+        0.3,
+        "generate",
+        "test-ctrlc-v0",
+        "--workers",
+        "2",
+        env={"D5RL_TOY_PIDS": str(pids)},
+        start_new_session=True,
+    )
     spec = register_toy("ctrlc", num_episodes=60, delay=0.3)
     shards = dataset_root(spec.dataset) / "shards"
     assert _wait_for(lambda: len(list(shards.glob("shard-*"))) >= 1 and len(list(pids.iterdir())) >= 2)
@@ -223,8 +240,7 @@ def test_ctrl_c_returns_fast_and_leaves_only_complete_shards(tmp_path):
 def test_killed_parent_leaves_no_workers(tmp_path):
     pids = tmp_path / "pids"
     pids.mkdir()
-    proc = toy_cli("kill9", 24, 0.3, "generate", "test-kill9-v0", "--workers", "2",
-                   env={"D5RL_TOY_PIDS": str(pids)})
+    proc = toy_cli("kill9", 24, 0.3, "generate", "test-kill9-v0", "--workers", "2", env={"D5RL_TOY_PIDS": str(pids)})
     assert _wait_for(lambda: len(list(pids.iterdir())) >= 2)
     workers = [int(p.name) for p in pids.iterdir()]
     proc.kill()
@@ -266,21 +282,27 @@ def _repairs_as_the_hint_says(spec, root, before, capsys, match):
     load_dataset(spec, generate=False)
 
 
-@pytest.mark.parametrize("damage", ["manifest-sha", "record-and-array", "garbage", "num_episodes-str", "not-object",
-                                    "shards-missing"])
+@pytest.mark.parametrize(
+    "damage", ["manifest-sha", "record-and-array", "garbage", "num_episodes-str", "not-object", "shards-missing"]
+)
 def test_damaged_manifest_or_record_is_repaired_by_the_command_the_hint_names(damage, capsys):
     spec = register_toy(f"mdmg-{damage.replace('_', '')}", num_episodes=12, per_shard=4)
     root = generate(spec, progress=False)
     before = tree_digest(root)
     manifest, shard = root / "manifest.json", root / "shards/shard-00001"
     if damage == "manifest-sha":  # the manifest is the damaged copy
-        _edit_json(manifest, lambda m: m["shards"][1]["arrays"]["actions"].update(
-            sha256=_flip_digit(m["shards"][1]["arrays"]["actions"]["sha256"])))
+        _edit_json(
+            manifest,
+            lambda m: m["shards"][1]["arrays"]["actions"].update(
+                sha256=_flip_digit(m["shards"][1]["arrays"]["actions"]["sha256"])
+            ),
+        )
         match = "does not match the manifest"
     elif damage == "record-and-array":  # an array changed and its record made to agree: the manifest is right
         flip(shard / "actions.npy")
-        _edit_json(shard / "shard.json", lambda r: r["arrays"]["actions"].update(sha256=fmt.sha256_file(
-            shard / "actions.npy")))
+        _edit_json(
+            shard / "shard.json", lambda r: r["arrays"]["actions"].update(sha256=fmt.sha256_file(shard / "actions.npy"))
+        )
         match = "does not match the manifest"
     elif damage == "garbage":
         manifest.write_bytes(b"\x00garbage{")
@@ -297,12 +319,15 @@ def test_damaged_manifest_or_record_is_repaired_by_the_command_the_hint_names(da
     _repairs_as_the_hint_says(spec, root, before, capsys, match)
 
 
-@pytest.mark.parametrize("field, value, match", [
-    ("arrays", [1, 2], "arrays is \\[1, 2\\], expected an object of arrays"),
-    ("episode_lengths", ["4"], "episode_lengths is \\['4'\\], expected 4 positive integers"),
-    ("episodes", "0-4", "episodes is '0-4'"),
-    ("file", "../../manifest.json", "file is '../../manifest.json', expected a file name inside the shard"),
-])
+@pytest.mark.parametrize(
+    "field, value, match",
+    [
+        ("arrays", [1, 2], "arrays is \\[1, 2\\], expected an object of arrays"),
+        ("episode_lengths", ["4"], "episode_lengths is \\['4'\\], expected 4 positive integers"),
+        ("episodes", "0-4", "episodes is '0-4'"),
+        ("file", "../../manifest.json", "file is '../../manifest.json', expected a file name inside the shard"),
+    ],
+)
 def test_wrong_types_in_a_shard_record_are_one_line_errors_and_generate_repairs_them(field, value, match, capsys):
     spec = register_toy(f"rtyp-{field.replace('_', '')}", num_episodes=8, per_shard=4)
     root = generate(spec, progress=False)
@@ -344,7 +369,7 @@ def test_dataset_json_that_is_not_a_bounded_regular_file_is_refused_without_read
         match = "is a character device, not a regular file"
     else:
         with open(manifest, "wb") as f:
-            f.truncate(fmt.JSON_MAX_BYTES + 1)  # sparse: no disk used
+            f.truncate(JSON_MAX_BYTES + 1)  # sparse: no disk used
         match = "more than the"
     with pytest.raises(DatasetCorruptError, match=match):
         load_dataset(spec, generate=False)

@@ -3,8 +3,8 @@ import re
 import numpy as np
 import pytest
 
-from d5rl.datasets.episode import Episode
 from d5rl.datasets.dataset import ChunkedArray, Dataset
+from d5rl.datasets.episode import Episode
 from d5rl.datasets.loading import load_dataset
 from tests.datasets.toy import register_toy
 
@@ -65,7 +65,7 @@ def test_mc_returns_brute_force():
     want = []
     for e, (t, term) in enumerate(zip((3, 5, 2), (True, False, True))):
         r = list((np.arange(t) + 1.0) * (e + 1)) + ([] if term else [(e + 1.0) * t] * 2000)  # γ^2000 ≈ 0
-        want += [sum(g ** k * r[j + k] for k in range(len(r) - j)) for j in range(t)]
+        want += [sum(g**k * r[j + k] for k in range(len(r) - j)) for j in range(t)]
     assert want[7] == pytest.approx(10.0 / (1 - g))  # the cut episode's last step: r_T / (1 − γ)
     np.testing.assert_allclose(ds.mc_returns(g), want, rtol=1e-6)
     b = ds.sample(8, np.random.default_rng(0), mc_gamma=g, indices=np.arange(8))
@@ -142,13 +142,20 @@ def test_a_misspelt_dataset_argument_is_refused_before_generating():
         load_dataset("kitchen-standard-mixed-v0", camera=["wrist"], progress=False)
 
 
-@pytest.mark.parametrize("task, kwargs, needle", [
-    ("kitchen-standard-mixed-v0", {"cameras": "wrist"}, "cameras must be a list of distinct names from ['overview'"),
-    ("kitchen-randomized-demos-v0", {"cameras": ["overview"]}, "from ['left', 'right', 'wrist'], got ['overview']"),
-    ("kitchen-randomized-demos-v0", {"cameras": ["left", "left"]}, "distinct"),
-    ("wx-sorting-v0", {"size": 100_000}, "size must be an integer number of pixels from 8 to 1024, got 100000"),
-    ("wx-sorting-v0", {"size": 0}, "got 0"),
-])
+@pytest.mark.parametrize(
+    "task, kwargs, needle",
+    [
+        (
+            "kitchen-standard-mixed-v0",
+            {"cameras": "wrist"},
+            "cameras must be a list of distinct names from ['overview'",
+        ),
+        ("kitchen-randomized-demos-v0", {"cameras": ["overview"]}, "from ['left', 'right', 'wrist'], got ['overview']"),
+        ("kitchen-randomized-demos-v0", {"cameras": ["left", "left"]}, "distinct"),
+        ("wx-sorting-v0", {"size": 100_000}, "size must be an integer number of pixels from 8 to 1024, got 100000"),
+        ("wx-sorting-v0", {"size": 0}, "got 0"),
+    ],
+)
 def test_a_bad_render_argument_is_refused_before_any_work(task, kwargs, needle, monkeypatch):
     from d5rl.datasets import generation
     from d5rl.errors import DatasetArgumentError

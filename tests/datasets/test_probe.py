@@ -24,8 +24,9 @@ def test_acts_with_the_mean_action_of_the_k_nearest_standardised_observations():
 
 def test_follows_expert_data_and_beats_random_actions():
     ds = toy_dataset(100, seed=0, expert_prob=1.0, noise=0.1)
-    nn = evaluate(NearestNeighbourPolicy(ds.observations, ds.arrays["actions"], k=5), "toy-reach-v0", 10, seed=5,
-                  num_envs=10)
+    nn = evaluate(
+        NearestNeighbourPolicy(ds.observations, ds.arrays["actions"], k=5), "toy-reach-v0", 10, seed=5, num_envs=10
+    )
 
     class Random:
         def eval_actions(self, obs, seed=None):

@@ -30,8 +30,10 @@ def test_every_registered_dataset_has_a_current_reference():
         ref = REFS[name]
         from d5rl.registry import resolve
 
-        assert (ref["dataset_version"], ref["generator_version"]) == \
-            (dspec.version, str(resolve(dspec.generator).version)), f"stale reference for {name}: {regenerate}"
+        assert (ref["dataset_version"], ref["generator_version"]) == (
+            dspec.version,
+            str(resolve(dspec.generator).version),
+        ), f"stale reference for {name}: {regenerate}"
         assert ref["numerics"] == dspec.numerics, f"{name} is {dspec.numerics} now: {regenerate}"
         whole = dspec.num_episodes if name in references.WHOLE else dspec.episodes_per_shard
         assert ref["num_episodes"] == whole and len(ref["shards"]) == -(-whole // dspec.episodes_per_shard)
@@ -99,13 +101,16 @@ def restricted_env(home: Path) -> dict[str, str]:
     env = {**os.environ, "D5RL_HOME": str(home), "PYTHONPATH": str(REPO)}
     env.update(numerics.portable_env(env))
     env["GLIBC_TUNABLES"] = numerics._with_libm_mask(env["GLIBC_TUNABLES"]).replace(
-        "glibc.cpu.hwcaps=", "glibc.cpu.hwcaps=-AVX,-AVX512F,-AVX512DQ,")
+        "glibc.cpu.hwcaps=", "glibc.cpu.hwcaps=-AVX,-AVX512F,-AVX512DQ,"
+    )
     return env
 
 
 def regenerate(task: str, episodes: int, env: dict[str, str], prefix: tuple[str, ...] = ()) -> Path:
-    code = (f"from d5rl.datasets.generation import generate; "
-            f"print(generate({task!r}, num_episodes={episodes}, workers=1, progress=False))")
+    code = (
+        f"from d5rl.datasets.generation import generate; "
+        f"print(generate({task!r}, num_episodes={episodes}, workers=1, progress=False))"
+    )
     out = subprocess.run([*prefix, sys.executable, "-c", code], env=env, capture_output=True, text=True, cwd=REPO)
     assert out.returncode == 0, out.stderr[-2000:]
     return Path(out.stdout.strip().splitlines()[-1])
@@ -129,8 +134,9 @@ QEMU = shutil.which("qemu-x86_64")
 
 
 @pytest.mark.slow
-@pytest.mark.skipif(not numerics.supported() or QEMU is None,
-                    reason="user-mode QEMU (`apt install qemu-user`) emulates the other CPUs")
+@pytest.mark.skipif(
+    not numerics.supported() or QEMU is None, reason="user-mode QEMU (`apt install qemu-user`) emulates the other CPUs"
+)
 @pytest.mark.parametrize("cpu", ["SandyBridge", "Haswell"])  # AVX without FMA; AVX2 and FMA; both without AVX-512
 @pytest.mark.parametrize("name", PORTABLE)
 def test_portable_datasets_regenerate_their_reference_on_other_cpus(name, cpu, tmp_path):
@@ -149,14 +155,19 @@ def cpu_has_fma() -> bool:
     return "fma" in line.split()
 
 
-@pytest.mark.skipif(not numerics.supported() or not cpu_has_fma(),
-                    reason="a CPU without FMA computes natively what portable numerics pin")
+@pytest.mark.skipif(
+    not numerics.supported() or not cpu_has_fma(),
+    reason="a CPU without FMA computes natively what portable numerics pin",
+)
 def test_native_numerics_fail_the_restricted_instruction_set_comparison(tmp_path):
     # what the test above would say of a generator left on native numerics: WidowX pick-and-place, still
     # native, differs from its portable bytes from the first episode on (libm's FMA variants inside MuJoCo)
     native_env = {k: v for k, v in os.environ.items() if k not in numerics.portable_env()}
-    native = regenerate("wx-sorting-pickplacedata-state-v0", 1,
-                        {**native_env, "D5RL_HOME": str(tmp_path / "native"), "PYTHONPATH": str(REPO)})
+    native = regenerate(
+        "wx-sorting-pickplacedata-state-v0",
+        1,
+        {**native_env, "D5RL_HOME": str(tmp_path / "native"), "PYTHONPATH": str(REPO)},
+    )
     portable = regenerate("wx-sorting-pickplacedata-state-v0", 1, restricted_env(tmp_path / "portable"))
     result = references.compare(native, references.make_entry(portable, None, "this machine"))
     assert not result.identical

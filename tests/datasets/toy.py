@@ -88,7 +88,7 @@ if __name__ == "__main__":
         from d5rl.cli import main
 
         register_toy(name=sys.argv[2], num_episodes=int(sys.argv[3]), delay=float(sys.argv[4]))
-        sys.exit(main(sys.argv[sys.argv.index("--") + 1:]))
+        sys.exit(main(sys.argv[sys.argv.index("--") + 1 :]))
     from d5rl.datasets.generation import generate
 
     spec = register_toy(name=sys.argv[1], num_episodes=int(sys.argv[2]), delay=float(sys.argv[3]))

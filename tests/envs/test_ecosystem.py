@@ -11,9 +11,15 @@ import pytest
 import d5rl
 
 # one task per env class; the copy must continue exactly as the original
-TASKS = ["toy-reach-v0", "a1-walk-v0", "a1-walk-v1", "kitchen-standard-mixed-v0", "wx-sorting-v0",
-         pytest.param("a1-hiking-v0", marks=pytest.mark.slow),  # builds its course: ~20 s
-         pytest.param("kitchen-randomized-mixed-v0", marks=pytest.mark.slow)]  # compiles a variant: ~30 s
+TASKS = [
+    "toy-reach-v0",
+    "a1-walk-v0",
+    "a1-walk-v1",
+    "kitchen-standard-mixed-v0",
+    "wx-sorting-v0",
+    pytest.param("a1-hiking-v0", marks=pytest.mark.slow),  # builds its course: ~20 s
+    pytest.param("kitchen-randomized-mixed-v0", marks=pytest.mark.slow),
+]  # compiles a variant: ~30 s
 
 
 def _leaves(x):

@@ -7,10 +7,13 @@ import pytest
 import d5rl
 
 
-@pytest.mark.parametrize("task, twin, dim, proprio", [
-    ("kitchen-standard-mixed-v0", "kitchen-standard-mixed-state-v0", 30, 9),
-    ("wx-sorting-pickplacedata-v0", "wx-sorting-pickplacedata-state-v0", 25, 8),
-])
+@pytest.mark.parametrize(
+    "task, twin, dim, proprio",
+    [
+        ("kitchen-standard-mixed-v0", "kitchen-standard-mixed-state-v0", 30, 9),
+        ("wx-sorting-pickplacedata-v0", "wx-sorting-pickplacedata-state-v0", 25, 8),
+    ],
+)
 def test_state_twin_observes_the_stored_states(task, twin, dim, proprio):
     spec, pix = d5rl.get_spec(twin), d5rl.get_spec(task)
     assert spec.dataset == pix.dataset and spec.observation == "state" and pix.observation == "pixels"
@@ -18,8 +21,10 @@ def test_state_twin_observes_the_stored_states(task, twin, dim, proprio):
     ds = d5rl.load_dataset(twin, episodes=1, workers=1, progress=False)
     obs = np.asarray(ds.arrays["observations"])
     assert obs.shape == (ds.num_transitions + 1, dim) and obs.dtype == np.float32
-    assert not (d5rl.load_dataset(twin, episodes=1, generate=False).arrays.keys() & {"observations/pixels/side",
-                                                                                    "observations/pixels/overview"})
+    assert not (
+        d5rl.load_dataset(twin, episodes=1, generate=False).arrays.keys()
+        & {"observations/pixels/side", "observations/pixels/overview"}
+    )
     # the first joints are the robot's (proprioception, stored with the data)
     np.testing.assert_array_equal(obs[:, :proprio], ds.arrays["observations/proprio"])
     # and each row is what the env observes when put in that state

@@ -4,9 +4,9 @@ import pytest
 
 pytest.importorskip("jax")
 
-from d5rl.runner import expand_grid, run_bench  # noqa: E402
-from d5rl.runner.archive import archive_files, main  # noqa: E402
-from d5rl.runner.grid import DEFAULT_JOB, DONE_FILE  # noqa: E402
+from d5rl.runner import expand_grid, run_bench
+from d5rl.runner.archive import archive_files, main
+from d5rl.runner.grid import DEFAULT_JOB, DONE_FILE
 
 PROTOCOL = {"eval_interval": 16, "eval_episodes": 2, "hidden_dims": "16,16", "batch_size": "16"}
 

@@ -25,8 +25,9 @@ PROTOCOL = {"eval_interval": 40, "eval_episodes": 3}
 
 
 def grid(offline=120, online=40, **overrides):
-    return expand_grid(TASKS, ALGOS, SEEDS, offline, online, overrides=overrides, job=toy.JOB, tuned=False,
-                       protocol_overrides=PROTOCOL)
+    return expand_grid(
+        TASKS, ALGOS, SEEDS, offline, online, overrides=overrides, job=toy.JOB, tuned=False, protocol_overrides=PROTOCOL
+    )
 
 
 def done_stamps(run_dir):
@@ -110,7 +111,7 @@ def test_report_numbers_match_the_logs(finished_run, tmp_path):
             assert float(table[task][f"{algo}_std"]) == pytest.approx(np.std(scores), abs=1e-12)
             assert int(table[task][f"{algo}_n"]) == len(SEEDS)
         md = (tmp_path / "report" / name.replace(".csv", ".md")).read_text()
-        for (task, algo), scores in finals[phase].items():
+        for scores in finals[phase].values():
             assert f"{np.mean(scores):.3f} ± {np.std(scores):.3f}" in md
     # aggregate IQM: pooled over tasks and seeds, by the definition
     with open(tmp_path / "report" / "aggregate.csv", newline="") as f:
@@ -119,11 +120,12 @@ def test_report_numbers_match_the_logs(finished_run, tmp_path):
         phase = "offline" if row["table"] == "table1_offline" else "online"
         pooled = sorted(s for (t, a), v in finals[phase].items() if a == row["method"] for s in v)
         k = len(pooled) // 4
-        assert float(row["iqm"]) == pytest.approx(np.mean(pooled[k:len(pooled) - k]), abs=1e-12)
+        assert float(row["iqm"]) == pytest.approx(np.mean(pooled[k : len(pooled) - k]), abs=1e-12)
         assert float(row["iqm_lo"]) <= float(row["iqm"]) <= float(row["iqm_hi"])
         assert float(row["mean"]) == pytest.approx(np.mean(pooled), abs=1e-12)
-    assert {(r["table"], r["method"]) for r in agg} == {(t, a) for t in ("table1_offline", "table2_online")
-                                                        for a in ALGOS}
+    assert {(r["table"], r["method"]) for r in agg} == {
+        (t, a) for t in ("table1_offline", "table2_online") for a in ALGOS
+    }
     text = report.read_text()
     assert "Table 1: offline" in text and "Table 2: offline-to-online" in text
     for task in TASKS:
@@ -138,10 +140,11 @@ def test_report_numbers_match_the_logs(finished_run, tmp_path):
 
 def test_failures_are_recorded_and_retried_once(tmp_path):
     sentinel = tmp_path / "failed-once"
-    cells = (expand_grid(TASKS[:1], ["bc"], [0], 40, 0, overrides={"fail": "always"}, job=toy.JOB, tuned=False)
-             + expand_grid(TASKS[:1], ["iql"], [0], 40, 0, overrides={"fail": f"once:{sentinel}"}, job=toy.JOB,
-                           tuned=False)
-             + expand_grid(TASKS[1:], ["bc"], [0], 40, 0, overrides={"fail": "crash"}, job=toy.JOB, tuned=False))
+    cells = (
+        expand_grid(TASKS[:1], ["bc"], [0], 40, 0, overrides={"fail": "always"}, job=toy.JOB, tuned=False)
+        + expand_grid(TASKS[:1], ["iql"], [0], 40, 0, overrides={"fail": f"once:{sentinel}"}, job=toy.JOB, tuned=False)
+        + expand_grid(TASKS[1:], ["bc"], [0], 40, 0, overrides={"fail": "crash"}, job=toy.JOB, tuned=False)
+    )
     run_dir = tmp_path / "run"
     result = run_bench(cells, run_dir, workers=2, progress=False)
     always, once, crash = (c.key for c in cells)
@@ -167,8 +170,9 @@ def test_failures_are_recorded_and_retried_once(tmp_path):
 
 
 def test_report_lists_unfinished_cells(tmp_path):
-    cells = (expand_grid(TASKS[:1], ["bc"], [0], 40, 0, job=toy.JOB, tuned=False)
-             + expand_grid(TASKS[:1], ["iql"], [0], 40, 0, overrides={"fail": "always"}, job=toy.JOB, tuned=False))
+    cells = expand_grid(TASKS[:1], ["bc"], [0], 40, 0, job=toy.JOB, tuned=False) + expand_grid(
+        TASKS[:1], ["iql"], [0], 40, 0, overrides={"fail": "always"}, job=toy.JOB, tuned=False
+    )
     run_bench(cells, tmp_path / "run", workers=0, progress=False, max_attempts=1)
     text = write_report(tmp_path / "run", reps=100, plots=False).read_text()
     assert "## Unfinished cells" in text and f"{TASKS[0]}/iql/seed0 | 1 |" in text
@@ -228,8 +232,9 @@ def test_killed_sweep_resumes_without_redoing_finished_cells(tmp_path):
     time.sleep(0.5)
     first = done_stamps(run_dir)
     assert 2 <= len(first) < 8
-    cells = expand_grid(TASKS, ALGOS, SEEDS, 120, 0, overrides={"sleep": 0.5}, job=toy.JOB, tuned=False,
-                        protocol_overrides=PROTOCOL)
+    cells = expand_grid(
+        TASKS, ALGOS, SEEDS, 120, 0, overrides={"sleep": 0.5}, job=toy.JOB, tuned=False, protocol_overrides=PROTOCOL
+    )
     result = run_bench(cells, run_dir, workers=2, progress=False)
     assert not result.failed, result.summary()
     assert sorted(result.skipped) == sorted(first)
@@ -237,16 +242,40 @@ def test_killed_sweep_resumes_without_redoing_finished_cells(tmp_path):
     after = done_stamps(run_dir)
     assert {k: after[k] for k in first} == first  # finished cells untouched
     assert len(after) == 8
-    for cell, cdir in find_cells(run_dir):  # interrupted cells restarted clean: one evaluation per step
+    for _cell, cdir in find_cells(run_dir):  # interrupted cells restarted clean: one evaluation per step
         steps = [int(r["step"]) for r in _read_eval(cdir / "eval.csv")]
         assert steps == [40, 80, 120]
 
 
 def test_cli_bench_and_report(tmp_path):
     run_dir = tmp_path / "run"
-    cmd = [sys.executable, "-m", "d5rl.runner", "bench", "--tasks", ",".join(TASKS), "--algos", "bc", "iql",
-           "--seeds", "0-0", "--offline-steps", "40", "--eval-interval", "20", "--eval-episodes", "2",
-           "--job", toy.JOB, "--workers", "2", "--out", str(run_dir), "--no-progress", "--no-tuned"]
+    cmd = [
+        sys.executable,
+        "-m",
+        "d5rl.runner",
+        "bench",
+        "--tasks",
+        ",".join(TASKS),
+        "--algos",
+        "bc",
+        "iql",
+        "--seeds",
+        "0-0",
+        "--offline-steps",
+        "40",
+        "--eval-interval",
+        "20",
+        "--eval-episodes",
+        "2",
+        "--job",
+        toy.JOB,
+        "--workers",
+        "2",
+        "--out",
+        str(run_dir),
+        "--no-progress",
+        "--no-tuned",
+    ]
     out = subprocess.run(cmd, cwd=REPO, capture_output=True, text=True, timeout=120)
     assert out.returncode == 0, out.stderr
     assert "4 finished, 0 already done, 0 failed" in out.stderr
@@ -254,11 +283,21 @@ def test_cli_bench_and_report(tmp_path):
     assert not (run_dir / "report" / "table2_online.md").exists()  # no online phase was run
     out = subprocess.run(cmd, cwd=REPO, capture_output=True, text=True, timeout=120)
     assert "0 finished, 4 already done" in out.stderr
-    out = subprocess.run([sys.executable, "-m", "d5rl.runner", "report", str(run_dir), "--no-plots", "--reps", "100",
-                          "--print"], cwd=REPO, capture_output=True, text=True, timeout=120)
+    out = subprocess.run(
+        [sys.executable, "-m", "d5rl.runner", "report", str(run_dir), "--no-plots", "--reps", "100", "--print"],
+        cwd=REPO,
+        capture_output=True,
+        text=True,
+        timeout=120,
+    )
     assert out.returncode == 0 and "| BC | IQL |" in out.stdout
-    bad = subprocess.run([sys.executable, "-m", "d5rl.runner", "report", str(tmp_path / "nothing")], cwd=REPO,
-                         capture_output=True, text=True, timeout=60)
+    bad = subprocess.run(
+        [sys.executable, "-m", "d5rl.runner", "report", str(tmp_path / "nothing")],
+        cwd=REPO,
+        capture_output=True,
+        text=True,
+        timeout=60,
+    )
     assert bad.returncode == 2 and "error:" in bad.stderr and "hint:" in bad.stderr
 
 
@@ -286,8 +325,16 @@ def test_datasets_are_generated_once_before_the_cells(tmp_path):
     root = dataset_root(spec.dataset)
     custom = expand_grid([spec.id], ["bc"], [0], 10, 0, job=toy.JOB, tuned=False)
     assert prepare_datasets(custom, workers=1, progress=False) == {} and not root.exists()  # custom jobs: untouched
-    cells = expand_grid([spec.id, "toy-reach-v0"], ["bc", "iql"], [0, 1], 10, 0, job=DEFAULT_JOB, tuned=False,
-                        overrides={"dataset_episodes": 4})
+    cells = expand_grid(
+        [spec.id, "toy-reach-v0"],
+        ["bc", "iql"],
+        [0, 1],
+        10,
+        0,
+        job=DEFAULT_JOB,
+        tuned=False,
+        overrides={"dataset_episodes": 4},
+    )
     assert prepare_datasets(cells, workers=1, progress=False) == {}
     assert json.loads((root / "manifest.json").read_text())["num_episodes"] == 4  # only the prefix the cells use
     cells = expand_grid([spec.id], ["bc"], [0], 10, 0, job=DEFAULT_JOB, tuned=False)

@@ -44,13 +44,23 @@ def test_numbers_for_a_critic_and_policy_in_closed_form():
 
 def test_refuses_pixels_and_agents_without_a_critic():
     with pytest.raises(D5RLError, match="flat state observations"):
-        q_probe(_Agent(), {"observations": {"pixels": np.zeros((2, 8, 8, 3))}, "actions": np.zeros((2, 2)),
-                           "rewards": np.zeros(2)}, np.random.default_rng(0))
+        q_probe(
+            _Agent(),
+            {"observations": {"pixels": np.zeros((2, 8, 8, 3))}, "actions": np.zeros((2, 2)), "rewards": np.zeros(2)},
+            np.random.default_rng(0),
+        )
     bc, config = get_agent("bc")
     agent = bc.create(0, np.zeros(3, np.float32), np.zeros(2, np.float32), config())
     with pytest.raises(D5RLError, match="no Q critic"):
-        q_probe(agent, {"observations": np.zeros((2, 3), np.float32), "actions": np.zeros((2, 2), np.float32),
-                        "rewards": np.zeros(2)}, np.random.default_rng(0))
+        q_probe(
+            agent,
+            {
+                "observations": np.zeros((2, 3), np.float32),
+                "actions": np.zeros((2, 2), np.float32),
+                "rewards": np.zeros(2),
+            },
+            np.random.default_rng(0),
+        )
 
 
 @pytest.mark.parametrize("algo", [a for a in AGENTS if a not in ("bc", "ddpm_bc")])

@@ -22,18 +22,28 @@ def local_ray():
     # process started without these settings (ray.init refuses to run twice)
     if ray.is_initialized():
         ray.shutdown()
-    ray.init(num_cpus=2, include_dashboard=False, log_to_driver=False,
-             runtime_env={"env_vars": {"PYTHONPATH": str(REPO)}})
+    ray.init(
+        num_cpus=2, include_dashboard=False, log_to_driver=False, runtime_env={"env_vars": {"PYTHONPATH": str(REPO)}}
+    )
     yield
     ray.shutdown()
 
 
 def test_ray_runs_the_tiny_grid(local_ray, tmp_path):
     sentinel = tmp_path / "failed-once"
-    cells = expand_grid(list(toy.GOALS), ["bc", "iql"], [0, 1], 120, 40, job=toy.JOB, tuned=False,
-                        protocol_overrides={"eval_interval": 40, "eval_episodes": 3})
-    flaky = expand_grid(list(toy.GOALS)[:1], ["td3bc"], [0], 40, 0, overrides={"fail": f"once:{sentinel}"},
-                        job=toy.JOB, tuned=False)
+    cells = expand_grid(
+        list(toy.GOALS),
+        ["bc", "iql"],
+        [0, 1],
+        120,
+        40,
+        job=toy.JOB,
+        tuned=False,
+        protocol_overrides={"eval_interval": 40, "eval_episodes": 3},
+    )
+    flaky = expand_grid(
+        list(toy.GOALS)[:1], ["td3bc"], [0], 40, 0, overrides={"fail": f"once:{sentinel}"}, job=toy.JOB, tuned=False
+    )
     run_dir = tmp_path / "run"
     t0 = time.time()
     result = run_bench(cells + flaky, run_dir, use_ray=True, progress=False)

@@ -7,17 +7,31 @@ import pytest
 
 pytest.importorskip("jax")
 
-from d5rl.runner import expand_grid, run_bench, write_report  # noqa: E402
-from d5rl.runner.grid import DEFAULT_JOB  # noqa: E402
+from d5rl.runner import expand_grid, run_bench, write_report
+from d5rl.runner.grid import DEFAULT_JOB
 
 
 @pytest.mark.slow
 def test_bench_trains_real_agents(tmp_path):
-    cells = expand_grid(["toy-reach-v0"], ["bc", "iql"], [0], 160, 40, job=DEFAULT_JOB,
-                        protocol_overrides={"eval_interval": 80, "eval_episodes": 3})
+    cells = expand_grid(
+        ["toy-reach-v0"],
+        ["bc", "iql"],
+        [0],
+        160,
+        40,
+        job=DEFAULT_JOB,
+        protocol_overrides={"eval_interval": 80, "eval_episodes": 3},
+    )
     result = run_bench(cells, tmp_path, workers=2, progress=False)
-    assert not result.failed, result.summary() + "\n" + "\n".join(
-        (c.directory(tmp_path) / "error.txt").read_text() for c in cells if (c.directory(tmp_path) / "error.txt").exists())
+    assert not result.failed, (
+        result.summary()
+        + "\n"
+        + "\n".join(
+            (c.directory(tmp_path) / "error.txt").read_text()
+            for c in cells
+            if (c.directory(tmp_path) / "error.txt").exists()
+        )
+    )
     write_report(tmp_path, reps=100)
     import csv
 

@@ -39,8 +39,13 @@ def test_paper_layout_and_numbers(tmp_path):
     md = (tmp_path / "report" / "table1_offline.md").read_text().splitlines()
     assert md[2] == "| Environment | Task | BC | IQL | TD3+BC | IDQL | myalgo |"
     rows = [line.split("|")[1:3] for line in md[4:]]
-    assert [t.strip() for _, t in rows] == ["kitchen-standard-mixed-v0", "kitchen-randomized-demos-v0",
-                                            "a1-run-v0", "a1-walk-v0", "wx-sorting-v0"]
+    assert [t.strip() for _, t in rows] == [
+        "kitchen-standard-mixed-v0",
+        "kitchen-randomized-demos-v0",
+        "a1-run-v0",
+        "a1-walk-v0",
+        "wx-sorting-v0",
+    ]
     assert [e.strip() for e, _ in rows] == ["Standard Kitchen", "Randomized Kitchen", "Locomotion", "", "WidowX"]
     with open(tmp_path / "report" / "table2_online.csv", newline="") as f:
         online = {r["task"]: r for r in csv.DictReader(f)}
@@ -86,12 +91,16 @@ def test_a_task_the_paper_did_not_benchmark_keeps_its_row_next_to_the_papers(tmp
         (cdir / "done").write_text("{}")
     write_report(tmp_path, reps=50, plots=False)
     md = (tmp_path / "report" / "table1_offline_vs_paper.md").read_text()
-    assert "| Randomized Kitchen | kitchen-randomized-suboptimal-state-v0 (not in the paper) | 0.500 ± 0.000 / - |" in md
+    assert (
+        "| Randomized Kitchen | kitchen-randomized-suboptimal-state-v0 (not in the paper) | 0.500 ± 0.000 / - |" in md
+    )
     assert "| a1-walk-v0 | 0.250 ± 0.000 / 1.006 ± 0.015 |" in md
     only_toy = tmp_path / "toy"
     cell = Cell("toy-reach-v0", "bc", 0, 100, 0)
     write_cell_file(cell, cell.directory(only_toy))
-    (cell.directory(only_toy) / "metrics.jsonl").write_text(json.dumps({"step": 100, "eval/toy-reach-v0/score": 1.0}) + "\n")
+    (cell.directory(only_toy) / "metrics.jsonl").write_text(
+        json.dumps({"step": 100, "eval/toy-reach-v0/score": 1.0}) + "\n"
+    )
     (cell.directory(only_toy) / "done").write_text("{}")
     write_report(only_toy, reps=50, plots=False)
     assert not (only_toy / "report" / "table1_offline_vs_paper.md").exists()  # no row of the paper's at all
@@ -110,8 +119,7 @@ def test_wall_time_counts_every_process(tmp_path):
     last process's, the protocol table says it is a lower bound."""
     from d5rl.runner.report import collect, protocol_markdown
 
-    for seed, (summary, processes) in enumerate([({"run_wall_s": 600.0, "episodes": 5}, 2),
-                                                ({"episodes": 5}, 1)]):
+    for seed, (summary, processes) in enumerate([({"run_wall_s": 600.0, "episodes": 5}, 2), ({"episodes": 5}, 1)]):
         cell = Cell("a1-walk-v0", "bc", seed, 100, 0)
         cdir = cell.directory(tmp_path)
         write_cell_file(cell, cdir)
@@ -129,9 +137,12 @@ def test_wall_time_counts_every_process(tmp_path):
 def test_what_the_agents_do_from_their_episode_stats(tmp_path):
     """The final evaluation's episode statistics (kitchen: which subtasks; the run's summary.json) are averaged
     per task and method; cells without them are left out of that table, not counted as zeros."""
-    for algo, seed, stats in [("bc", 0, {"subtask/microwave": 1.0, "subtask/slide_cabinet": 0.2}),
-                              ("bc", 1, {"subtask/microwave": 0.5, "subtask/slide_cabinet": 0.0}),
-                              ("bc", 2, None), ("iql", 0, {"subtask/microwave": 0.0})]:
+    for algo, seed, stats in [
+        ("bc", 0, {"subtask/microwave": 1.0, "subtask/slide_cabinet": 0.2}),
+        ("bc", 1, {"subtask/microwave": 0.5, "subtask/slide_cabinet": 0.0}),
+        ("bc", 2, None),
+        ("iql", 0, {"subtask/microwave": 0.0}),
+    ]:
         cell = Cell("kitchen-standard-mixed-state-v0", algo, seed, 100, 0)
         cdir = cell.directory(tmp_path)
         write_cell_file(cell, cdir)
@@ -152,8 +163,11 @@ def test_an_entry_with_fewer_seeds_than_the_table_says_how_many(tmp_path):
     write_report(tmp_path, reps=50, plots=False)
     for name in ("table1_offline.md", "table1_offline_vs_paper.md"):
         md = (tmp_path / "report" / name).read_text()
-        rows = {line.split("|")[2].strip().split(" ")[0]: [c.strip() for c in line.split("|")[3:-1]]
-                for line in md.splitlines() if "| a1-" in line}
+        rows = {
+            line.split("|")[2].strip().split(" ")[0]: [c.strip() for c in line.split("|")[3:-1]]
+            for line in md.splitlines()
+            if "| a1-" in line
+        }
         walk_iql = truth[("a1-walk-v0", "iql", 0)][0]
         assert rows["a1-walk-v0"][1].startswith(f"{walk_iql:.3f} ± 0.000 (n=1)")
         run_bc = [truth[("a1-run-v0", "bc", s)][0] for s in (0, 1)]

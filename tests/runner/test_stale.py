@@ -32,7 +32,11 @@ def test_a_result_is_stale_when_its_dataset_or_generator_version_changed():
     assert stale_data(TASK, None) is None  # nothing recorded: cannot tell
     older = {**now, "dataset_version": now["dataset_version"] - 1}
     why = stale_data(TASK, older)
-    assert why is not None and f"v{now['dataset_version'] - 1}" in why and f"now toy-reach v{now['dataset_version']}" in why
+    assert (
+        why is not None
+        and f"v{now['dataset_version'] - 1}" in why
+        and f"now toy-reach v{now['dataset_version']}" in why
+    )
     assert stale_data(TASK, {**now, "generator_version": "toy-reach-0-old"}) is not None
     assert stale_data("no-such-task-v0", older) is None  # a task only a custom job knows
 

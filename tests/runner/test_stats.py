@@ -12,7 +12,7 @@ def brute_iqm(values):
     """Interquartile mean by the definition: drop the lowest and highest floor(n/4) values."""
     v = sorted(float(x) for x in values)
     k = len(v) // 4
-    middle = v[k:len(v) - k]
+    middle = v[k : len(v) - k]
     return sum(middle) / len(middle)
 
 
@@ -67,8 +67,7 @@ def test_random_bootstrap_converges_to_exact_distribution():
 def test_resampling_is_stratified():
     # one task all zeros, one all ones, same size: a stratified resample always pools half/half
     strata = [np.zeros(4), np.ones(4)]
-    draws = bootstrap_replicates(strata, statistic=lambda x: float(np.mean(x)), reps=500,
-                                 rng=np.random.default_rng(0))
+    draws = bootstrap_replicates(strata, statistic=lambda x: float(np.mean(x)), reps=500, rng=np.random.default_rng(0))
     assert np.all(draws == 0.5)
     # the vectorised IQM path too
     point, lo, hi = stratified_bootstrap_ci(strata, reps=500, rng=np.random.default_rng(0))

@@ -55,9 +55,16 @@ class ReachEnv(gym.Env):
 
 def register_tasks():
     for tid, goal in GOALS.items():
-        register(TaskSpec(id=tid, entry_point="tests.runner.toy:ReachEnv", max_episode_steps=HORIZON,
-                          description="runner test task", env_kwargs={"goal": goal},
-                          score=ScoreRef(random=0.0, expert=1.0, source="normalized inside the job")))
+        register(
+            TaskSpec(
+                id=tid,
+                entry_point="tests.runner.toy:ReachEnv",
+                max_episode_steps=HORIZON,
+                description="runner test task",
+                env_kwargs={"goal": goal},
+                score=ScoreRef(random=0.0, expert=1.0, source="normalized inside the job"),
+            )
+        )
 
 
 register_tasks()
@@ -98,8 +105,9 @@ def reach_job(cell, cell_dir: Path):
     acts = np.clip((goal - xs) / 0.1, -1, 1) + 0.3 * rng.standard_normal((256, 2))
     feats = goal - xs
     W = 0.1 * rng.standard_normal((2, 2))
-    (Path(cell_dir) / "config.json").write_text(json.dumps({"algo": cell.algo, "task": cell.task, "lr": lr,
-                                                            "seed": cell.seed, **over}, indent=2))
+    (Path(cell_dir) / "config.json").write_text(
+        json.dumps({"algo": cell.algo, "task": cell.task, "lr": lr, "seed": cell.seed, **over}, indent=2)
+    )
 
     def score(W_):
         ev = np.random.default_rng(1000 + cell.seed)  # same eval starts for all three policies

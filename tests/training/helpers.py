@@ -9,8 +9,15 @@ import numpy as np
 from d5rl.training import loop
 
 # a small network and a short evaluation: loop tests check behaviour, not learning
-SMALL = {"hidden_dims": "32,32", "batch_size": "32", "eval_episodes": "2", "eval_envs": "2",
-         "log_interval": "16", "progress": "false", "tensorboard": "false"}
+SMALL = {
+    "hidden_dims": "32,32",
+    "batch_size": "32",
+    "eval_episodes": "2",
+    "eval_envs": "2",
+    "log_interval": "16",
+    "progress": "false",
+    "tensorboard": "false",
+}
 
 
 def overrides(**kw):

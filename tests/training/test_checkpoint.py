@@ -11,14 +11,22 @@ import numpy as np
 import pytest
 
 from d5rl.datasets.dataset import Dataset
-from d5rl.training.checkpoint import (Checkpoint, CheckpointError, load_checkpoint, read_checkpoint,
-                                      save_checkpoint)
-from d5rl.training.loop import load_run, train
 from d5rl.envs.toy.data import toy_dataset
+from d5rl.training.checkpoint import Checkpoint, CheckpointError, load_checkpoint, read_checkpoint, save_checkpoint
+from d5rl.training.loop import load_run, train
 from tests.training.helpers import interrupt_after_checkpoint
 
-SMALL = ["hidden_dims=32,32", "batch_size=32", "eval_episodes=2", "eval_envs=2", "log_interval=16",
-         "progress=false", "tensorboard=false", "eval_interval=1000", "updates_per_call=8"]
+SMALL = [
+    "hidden_dims=32,32",
+    "batch_size=32",
+    "eval_episodes=2",
+    "eval_envs=2",
+    "log_interval=16",
+    "progress=false",
+    "tensorboard=false",
+    "eval_interval=1000",
+    "updates_per_call=8",
+]
 
 
 class _Payload:
@@ -103,8 +111,12 @@ def test_crafted_pickle_is_never_opened_by_train_or_eval(tmp_path):
         train("bc", "toy-reach-v0", 16, 0, 0, SMALL + ["checkpoint_interval=8"], run, dataset=ds)
     with pytest.raises(CheckpointError, match="pickle"):
         load_run(run)
-    proc = subprocess.run([sys.executable, "-m", "d5rl.cli", "eval", str(run), "--episodes", "1"],
-                          capture_output=True, text=True, timeout=300)
+    proc = subprocess.run(
+        [sys.executable, "-m", "d5rl.cli", "eval", str(run), "--episodes", "1"],
+        capture_output=True,
+        text=True,
+        timeout=300,
+    )
     assert proc.returncode == 2 and "Traceback" not in proc.stderr
     assert proc.stderr.startswith("error: ") and "pickle" in proc.stderr.splitlines()[0]
     assert not marker.exists()
@@ -174,9 +186,14 @@ def _manifest_edit(d, edit):
     (d / "manifest.json").write_text(json.dumps(m))
 
 
-@pytest.mark.parametrize("kind, match", [("dev-zero", "is a character device, not a regular file"),
-                                         ("fifo", "is a FIFO, not a regular file"),
-                                         ("bigger", "more than the 70 it can be")])
+@pytest.mark.parametrize(
+    "kind, match",
+    [
+        ("dev-zero", "is a character device, not a regular file"),
+        ("fifo", "is a FIFO, not a regular file"),
+        ("bigger", "more than the 70 it can be"),
+    ],
+)
 def test_a_checkpoint_file_that_is_not_a_bounded_regular_file_is_refused_before_reading(tmp_path, kind, match):
     d = _one_checkpoint(tmp_path)
     target = d / "agent.msgpack"
@@ -211,11 +228,14 @@ def _npy_header(shape, dtype="<f4") -> bytes:
     return bio.getvalue()
 
 
-@pytest.mark.parametrize("kind, match", [
-    ("zip-bomb", "compressed, or larger than the archive"),
-    ("huge-header", r"declares shape \(3000000000000,\)"),
-    ("objects", "np.savez does not write|holds Python objects|unreadable"),
-])
+@pytest.mark.parametrize(
+    "kind, match",
+    [
+        ("zip-bomb", "compressed, or larger than the archive"),
+        ("huge-header", r"declares shape \(3000000000000,\)"),
+        ("objects", "np.savez does not write|holds Python objects|unreadable"),
+    ],
+)
 def test_a_crafted_buffer_npz_is_refused_before_allocating(tmp_path, kind, match):
     import hashlib
 
@@ -227,17 +247,21 @@ def test_a_crafted_buffer_npz_is_refused_before_allocating(tmp_path, kind, match
         blob = _npz_with(_npy_header((1,), "|O") + b"\x80\x04N.")
     d = _one_checkpoint(tmp_path, {"meta": np.array([1, 0, 4])})
     (d / "buffer.npz").write_bytes(blob)
-    _manifest_edit(d, lambda m: m["files"]["buffer.npz"].update(bytes=len(blob),
-                                                                 sha256=hashlib.sha256(blob).hexdigest()))
+    _manifest_edit(
+        d, lambda m: m["files"]["buffer.npz"].update(bytes=len(blob), sha256=hashlib.sha256(blob).hexdigest())
+    )
     with pytest.raises(CheckpointError, match=match):
         read_checkpoint(d)
 
 
-@pytest.mark.parametrize("edit, match", [
-    (lambda m: m.update(files=["agent.msgpack"]), r"files is \['agent.msgpack'\], expected an object"),
-    (lambda m: m["files"].update({"agent.msgpack": "70"}), "expected an object with the file's bytes and sha256"),
-    (lambda m: m["files"]["agent.msgpack"].update(bytes="70"), "expected an object with the file's bytes"),
-])
+@pytest.mark.parametrize(
+    "edit, match",
+    [
+        (lambda m: m.update(files=["agent.msgpack"]), r"files is \['agent.msgpack'\], expected an object"),
+        (lambda m: m["files"].update({"agent.msgpack": "70"}), "expected an object with the file's bytes and sha256"),
+        (lambda m: m["files"]["agent.msgpack"].update(bytes="70"), "expected an object with the file's bytes"),
+    ],
+)
 def test_wrong_types_in_a_checkpoint_manifest_are_one_line_errors(tmp_path, edit, match):
     d = _one_checkpoint(tmp_path)
     _manifest_edit(d, edit)
@@ -252,9 +276,14 @@ def test_a_deeply_nested_checkpoint_manifest_is_a_one_line_error(tmp_path):
         read_checkpoint(d)
 
 
-@pytest.mark.parametrize("field, value, match", [("step", "abc", "step is 'abc', expected a non-negative integer"),
-                                                 ("rng", {"state": 1}, "rng is .*expected the state of numpy"),
-                                                 ("metric_sums", [1], "metric_sums is \\[1\\]")])
+@pytest.mark.parametrize(
+    "field, value, match",
+    [
+        ("step", "abc", "step is 'abc', expected a non-negative integer"),
+        ("rng", {"state": 1}, "rng is .*expected the state of numpy"),
+        ("metric_sums", [1], "metric_sums is \\[1\\]"),
+    ],
+)
 def test_wrong_types_in_a_run_state_are_one_line_errors(tmp_path, field, value, match):
     from d5rl.training.checkpoint import check_state
     from d5rl.training.parts import RunState
@@ -265,8 +294,10 @@ def test_wrong_types_in_a_run_state_are_one_line_errors(tmp_path, field, value, 
         check_state({**good, field: value}, tmp_path / "state.json")
 
 
-@pytest.mark.parametrize("text, match", [("{", "not valid JSON"), ('{"algo": 3}', "algo is 3, expected an algorithm"),
-                                         ("[]", "expected a JSON object")])
+@pytest.mark.parametrize(
+    "text, match",
+    [("{", "not valid JSON"), ('{"algo": 3}', "algo is 3, expected an algorithm"), ("[]", "expected a JSON object")],
+)
 def test_a_broken_run_config_is_a_one_line_error_under_eval(tmp_path, text, match):
     from d5rl.cli import main as cli_main
 

@@ -43,8 +43,15 @@ def _alive(pid: int) -> bool:
 
 
 def _start():
-    proc = subprocess.Popen([sys.executable, "-c", SCRIPT], cwd=REPO, stdout=subprocess.PIPE, stderr=subprocess.PIPE,
-                            text=True, env={**os.environ, "PYTHONPATH": str(REPO)}, start_new_session=True)
+    proc = subprocess.Popen(
+        [sys.executable, "-c", SCRIPT],
+        cwd=REPO,
+        stdout=subprocess.PIPE,
+        stderr=subprocess.PIPE,
+        text=True,
+        env={**os.environ, "PYTHONPATH": str(REPO)},
+        start_new_session=True,
+    )
     assert proc.stdout.readline().strip() == "start"
     time.sleep(0.5)
     return proc, _children(proc.pid)

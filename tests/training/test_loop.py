@@ -6,18 +6,33 @@ import numpy as np
 import pytest
 
 from d5rl.agents.config import ConfigError
-from d5rl.training.loop import NonFiniteLossError, load_run, train
 from d5rl.envs.toy.data import toy_dataset
-from tests.training.helpers import leaves, overrides, rows
+from d5rl.training.loop import NonFiniteLossError, load_run, train
+from tests.training.helpers import leaves, overrides
 
 
 def test_offline_run_writes_everything(tmp_path):
     ds = toy_dataset(20)
-    res = train("iql", "toy-reach-v0", 64, 0, 0, overrides(eval_interval=32, checkpoint_interval=32),
-                tmp_path / "run", dataset=ds)
+    res = train(
+        "iql",
+        "toy-reach-v0",
+        64,
+        0,
+        0,
+        overrides(eval_interval=32, checkpoint_interval=32),
+        tmp_path / "run",
+        dataset=ds,
+    )
     run = tmp_path / "run"
-    for name in ("config.json", "metrics.jsonl", "metrics.csv", "summary.json", "checkpoint/manifest.json",
-                 "checkpoint/agent.msgpack", "checkpoint/state.json"):
+    for name in (
+        "config.json",
+        "metrics.jsonl",
+        "metrics.csv",
+        "summary.json",
+        "checkpoint/manifest.json",
+        "checkpoint/agent.msgpack",
+        "checkpoint/state.json",
+    ):
         assert (run / name).exists(), name
     cfg = json.loads((run / "config.json").read_text())
     assert cfg["agent"]["hidden_dims"] == [32, 32] and cfg["train"]["frame_stack"] == 1
@@ -70,8 +85,17 @@ def test_modern_baselines_train_offline_then_online_from_the_cli(tmp_path, capsy
     from d5rl.cli import main
 
     small = ["actor_hidden_dims=16,16", "critic_hidden_dims=16,16"] if algo == "fql" else ["hidden_dims=16,16"]
-    args = ["train", algo, "toy-reach-v0", "--offline-steps", "16", "--online-steps", "30", "--run-dir",
-            str(tmp_path / "run")]
+    args = [
+        "train",
+        algo,
+        "toy-reach-v0",
+        "--offline-steps",
+        "16",
+        "--online-steps",
+        "30",
+        "--run-dir",
+        str(tmp_path / "run"),
+    ]
     for s in small + ["batch_size=16", "eval_episodes=2", "eval_envs=2", "progress=false", "tensorboard=false"]:
         args += ["--set", s]
     assert main(args) == 0
@@ -99,16 +123,25 @@ def test_the_run_records_the_dataset_it_trains_on(tmp_path):
     assert "dataset" not in json.loads((tmp_path / "m" / "config.json").read_text())
 
 
-@pytest.mark.parametrize("setting", ["hidden_dims=1000000000", "batch_size=1000000000",
-                                     "hidden_dims=100000,100000,100000"])
+@pytest.mark.parametrize(
+    "setting", ["hidden_dims=1000000000", "batch_size=1000000000", "hidden_dims=100000,100000,100000"]
+)
 def test_networks_or_batches_too_big_for_memory_fail_in_one_line_before_anything_is_written(tmp_path, setting):
     from d5rl.agents.config import ConfigError
     from d5rl.training.loop import available_memory
 
     assert available_memory() is not None
     with pytest.raises(ConfigError, match=r"need at least [\d,.]+ GiB; [\d,.]+ GiB are available") as e:
-        train("td3bc", "toy-reach-v0", 8, 0, 0, overrides(**dict([setting.split("=")])), tmp_path / "run",
-              dataset=toy_dataset(4))
+        train(
+            "td3bc",
+            "toy-reach-v0",
+            8,
+            0,
+            0,
+            overrides(**dict([setting.split("=")])),
+            tmp_path / "run",
+            dataset=toy_dataset(4),
+        )
     assert "\n" not in str(e.value)
     assert not (tmp_path / "run").exists()
 
@@ -139,9 +172,14 @@ def test_a_full_disk_under_the_run_dir_is_named_as_the_run_dirs(tmp_path, monkey
     assert "--run-dir" in e.value.hint and "D5RL_HOME" not in e.value.hint
 
 
-@pytest.mark.parametrize("content, match", [("fifo", "is a FIFO, not a regular file"),
-                                            ('{"step": 1}\n{"step": 2\n', "line 2 is not a metrics row"),
-                                            ('{"step": "1"}\n', "line 1 is not a metrics row")])
+@pytest.mark.parametrize(
+    "content, match",
+    [
+        ("fifo", "is a FIFO, not a regular file"),
+        ('{"step": 1}\n{"step": 2\n', "line 2 is not a metrics row"),
+        ('{"step": "1"}\n', "line 1 is not a metrics row"),
+    ],
+)
 def test_a_damaged_metrics_log_is_a_one_line_error(tmp_path, content, match):
     import os
 

@@ -6,10 +6,10 @@ import json
 import mujoco
 import numpy as np
 
+from d5rl.datasets.dataset import mc_tail
 from d5rl.envs.kitchen.subtasks import SUBTASK_NAMES, SUBTASKS
 from d5rl.envs.kitchen.task import KitchenEnv
 from d5rl.training.logger import Logger
-from d5rl.datasets.dataset import mc_tail
 from d5rl.training.replay import NO_RETURN, ReplayBuffer
 
 
@@ -87,8 +87,9 @@ def test_cli_parsers(tmp_path, capsys):
     sub = parser.add_subparsers()
     add_train_parser(sub)
     add_eval_parser(sub)
-    args = parser.parse_args(["train", "iql", "toy-reach-v0", "--set", "expectile=0.9", "--set",
-                              "eval_interval=5", "--show-config"])
+    args = parser.parse_args(
+        ["train", "iql", "toy-reach-v0", "--set", "expectile=0.9", "--set", "eval_interval=5", "--show-config"]
+    )
     assert args.func(args) == 0
     shown = json.loads(capsys.readouterr().out)
     assert shown["agent"]["expectile"] == 0.9 and shown["train"]["eval_interval"] == 5
@@ -143,8 +144,15 @@ def test_evaluation_averages_the_tasks_episode_stats():
             return np.zeros((len(obs), 9), np.float32)
 
     for processes in (False, True):
-        out = evaluate(Still(), "kitchen-standard-mixed-state-v0", 2, seed=7, num_envs=2, processes=processes,
-                       env_fn=_short_kitchen)
+        out = evaluate(
+            Still(),
+            "kitchen-standard-mixed-state-v0",
+            2,
+            seed=7,
+            num_envs=2,
+            processes=processes,
+            env_fn=_short_kitchen,
+        )
         assert out["stats"]["subtask/microwave"] == 0.5, processes  # episodes reset with seeds 7 and 8
         assert out["stats"]["subtask/kettle"] == 0.0 and len(out["stats"]) == len(SUBTASK_NAMES)
 

@@ -5,9 +5,9 @@ import json
 import numpy as np
 import pytest
 
+from d5rl.envs.toy.data import toy_dataset
 from d5rl.training.loop import train
 from tests.training.helpers import interrupt_after_checkpoint, leaves, overrides, rows
-from d5rl.envs.toy.data import toy_dataset
 
 
 def assert_offline_resume_is_exact(tmp_path, algo, task, steps, kw, ds, interrupt_at):
@@ -55,11 +55,10 @@ def test_online_resume_is_exact_for_rlpd(tmp_path):
 
 def test_calql_online_finetuning_runs(tmp_path):
     ds = toy_dataset(10)
-    res = train("calql", "toy-reach-v0", 16, 30, 0, overrides(cql_n_actions=2, eval_interval=1000), tmp_path / "c",
-                dataset=ds)
+    res = train(
+        "calql", "toy-reach-v0", 16, 30, 0, overrides(cql_n_actions=2, eval_interval=1000), tmp_path / "c", dataset=ds
+    )
     assert res["step"] == 46 and np.isfinite(res["return"])
-
-
 
 
 class _Counting:
@@ -84,8 +83,14 @@ def test_a_killed_evaluation_resumes_at_its_first_unfinished_episode(tmp_path):
     unbroken = evaluate(agent, "toy-reach-v0", 6, seed=3, num_envs=2)
     path = tmp_path / "eval_progress.json"
     with pytest.raises(KeyboardInterrupt):
-        evaluate(_Counting(agent, kill_at=60), "toy-reach-v0", 6, seed=3, num_envs=2,
-                 progress=EvalProgress(path, {"step": 7}))
+        evaluate(
+            _Counting(agent, kill_at=60),
+            "toy-reach-v0",
+            6,
+            seed=3,
+            num_envs=2,
+            progress=EvalProgress(path, {"step": 7}),
+        )
     saved = json.loads(path.read_text())
     assert len(saved["episodes"]) == 4 and saved["evaluation"]["step"] == 7
     again = _Counting(agent)
@@ -99,8 +104,10 @@ def test_an_evaluation_keeps_the_time_its_finished_episodes_took_before_a_resume
 
     clock = [1000.0]
     monkeypatch.setattr(evaluation.time, "monotonic", lambda: clock[0])
-    ev, ep = {"task_id": "toy-reach-v0", "seed": 3, "num_episodes": 6, "frame_stack": 1}, \
-        {"return": 1.0, "length": 25, "success": False, "info": {}}
+    ev, ep = (
+        {"task_id": "toy-reach-v0", "seed": 3, "num_episodes": 6, "frame_stack": 1},
+        {"return": 1.0, "length": 25, "success": False, "info": {}},
+    )
     first = evaluation.EvalProgress(tmp_path / "p.json", {"step": 7})
     assert first.load(ev) == [] and first.earlier_s == 0.0
     clock[0] += 30.0
@@ -123,13 +130,25 @@ def test_an_evaluation_does_not_resume_from_another_or_a_damaged_one(tmp_path, c
     agent = make_agent("bc")
     path = tmp_path / "eval_progress.json"
     with pytest.raises(KeyboardInterrupt):
-        evaluate(_Counting(agent, kill_at=30), "toy-reach-v0", 4, seed=3, num_envs=2,
-                 progress=EvalProgress(path, {"step": 7}))
+        evaluate(
+            _Counting(agent, kill_at=30),
+            "toy-reach-v0",
+            4,
+            seed=3,
+            num_envs=2,
+            progress=EvalProgress(path, {"step": 7}),
+        )
     if case == "damaged":
         path.write_text(path.read_text()[:-20])
     again = _Counting(agent)
-    out = evaluate(again, "toy-reach-v0", 4, seed=3, num_envs=2,
-                   progress=EvalProgress(path, {"step": 8 if case == "other identity" else 7}))
+    out = evaluate(
+        again,
+        "toy-reach-v0",
+        4,
+        seed=3,
+        num_envs=2,
+        progress=EvalProgress(path, {"step": 8 if case == "other identity" else 7}),
+    )
     assert again.calls == 50 and out == evaluate(agent, "toy-reach-v0", 4, seed=3, num_envs=2)
     assert ("is damaged" in capsys.readouterr().err) == (case == "damaged")
 
@@ -176,10 +195,18 @@ def test_a_second_train_into_a_live_run_dir_fails_in_one_line_and_a_finished_run
     run_dir = tmp_path / "run"
     run_dir.mkdir()
     # another process holds the run directory (as a live `d5rl train` does for its whole run)
-    holder = subprocess.Popen([sys.executable, "-c", "import fcntl, os, sys, time\n"
-                               f"fd = os.open({str(run_dir / RUN_LOCK)!r}, os.O_RDWR | os.O_CREAT)\n"
-                               "fcntl.flock(fd, fcntl.LOCK_EX); os.write(fd, f'{os.getpid()}\\n'.encode())\n"
-                               "print('held', flush=True); time.sleep(60)"], stdout=subprocess.PIPE, text=True)
+    holder = subprocess.Popen(
+        [
+            sys.executable,
+            "-c",
+            "import fcntl, os, sys, time\n"
+            f"fd = os.open({str(run_dir / RUN_LOCK)!r}, os.O_RDWR | os.O_CREAT)\n"
+            "fcntl.flock(fd, fcntl.LOCK_EX); os.write(fd, f'{os.getpid()}\\n'.encode())\n"
+            "print('held', flush=True); time.sleep(60)",
+        ],
+        stdout=subprocess.PIPE,
+        text=True,
+    )
     try:
         assert holder.stdout.readline().strip() == "held"
         with pytest.raises(RunDirError, match=f"another d5rl process \\(pid {holder.pid}\\) is training into"):

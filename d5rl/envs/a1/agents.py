@@ -63,8 +63,7 @@ AGENTS = {
     "goals-smooth-v1": AgentSpec(1.0, env_version=1, task="run_toward", floors="smooth"),
     # ... and score references
     "run-1.25-v1": AgentSpec(1.25, role="reference", env_version=1, task="run"),
-    "hiking-v1": AgentSpec(1.0, role="reference", band=(-0.1, 0.1), episode_steps=1000, env_version=1,
-                           task="hiking"),
+    "hiking-v1": AgentSpec(1.0, role="reference", band=(-0.1, 0.1), episode_steps=1000, env_version=1, task="hiking"),
 }
 
 
@@ -74,9 +73,17 @@ def describe(agent: str, policy_dir: Path = POLICY_DIR) -> str:
 
     spec = AGENTS[agent]
     steps = agent_log(agent, str(policy_dir))["steps"]
-    where = "on the hiking course past its waypoints" if spec.terrain == "course" or spec.task == "hiking" else (
-        "on flat ground, following a turning heading command" if spec.command == "heading" else
-        f"toward random goals ({spec.floors} floors)" if spec.task == "run_toward" else "on flat ground")
+    where = (
+        "on the hiking course past its waypoints"
+        if spec.terrain == "course" or spec.task == "hiking"
+        else (
+            "on flat ground, following a turning heading command"
+            if spec.command == "heading"
+            else f"toward random goals ({spec.floors} floors)"
+            if spec.task == "run_toward"
+            else "on flat ground"
+        )
+    )
     return f"SAC, {steps:,} steps, tracking {spec.target_speed} m/s {where}"
 
 
@@ -99,5 +106,7 @@ def training_reward(spec: AgentSpec, info: dict) -> float:
     speed = rewards.tolerance(info["forward_speed"], lo, hi, spec.target_speed, "linear") * info["standing"]
     if not spec.directed:
         return float(rewards.SPEED_REWARD_SCALE * speed - rewards.ENERGY_COEF * info["energy"])
-    return float(rewards.SPEED_REWARD_SCALE * speed * rewards.heading_term(info["heading_error"])
-                 - rewards.HIKING_ENERGY_COEF * info["energy"])
+    return float(
+        rewards.SPEED_REWARD_SCALE * speed * rewards.heading_term(info["heading_error"])
+        - rewards.HIKING_ENERGY_COEF * info["energy"]
+    )

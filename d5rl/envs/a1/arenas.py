@@ -46,17 +46,24 @@ def add_floor(spec: mujoco.MjSpec, floor: str) -> None:
         raise ValueError(f"floor must be one of {FLOORS}, got {floor!r}")
     if floor == "flat":
         return
-    spec.add_hfield(name=FIELD, size=[FIELD_HALF, FIELD_HALF, FIELD_ELEVATION, FIELD_BASE],
-                    nrow=FIELD_RES, ncol=FIELD_RES, userdata=[0.0] * (FIELD_RES * FIELD_RES))
-    spec.worldbody.add_geom(name=FIELD, type=mujoco.mjtGeom.mjGEOM_HFIELD, hfieldname=FIELD,
-                            material="groundplane", pos=[0.0, 0.0, FIELD_Z])
+    spec.add_hfield(
+        name=FIELD,
+        size=[FIELD_HALF, FIELD_HALF, FIELD_ELEVATION, FIELD_BASE],
+        nrow=FIELD_RES,
+        ncol=FIELD_RES,
+        userdata=[0.0] * (FIELD_RES * FIELD_RES),
+    )
+    spec.worldbody.add_geom(
+        name=FIELD, type=mujoco.mjtGeom.mjGEOM_HFIELD, hfieldname=FIELD, material="groundplane", pos=[0.0, 0.0, FIELD_Z]
+    )
     if floor != "course":
         return
     for i, (x_low, x_crest) in enumerate(WEDGES):
         verts = [[x_low, y, WEDGE_Z[0]] for y in WEDGE_Y] + [[x_crest, y, z] for y in WEDGE_Y for z in WEDGE_Z]
         spec.add_mesh(name=f"wedge{i}", uservert=np.ravel(verts).tolist())
-        spec.worldbody.add_geom(name=f"wedge{i}", type=mujoco.mjtGeom.mjGEOM_MESH, meshname=f"wedge{i}",
-                                rgba=[0.0, 0.5, 1.0, 1.0])
+        spec.worldbody.add_geom(
+            name=f"wedge{i}", type=mujoco.mjtGeom.mjGEOM_MESH, meshname=f"wedge{i}", rgba=[0.0, 0.5, 1.0, 1.0]
+        )
     for i, (x, y) in enumerate(WAYPOINTS):
         spec.worldbody.add_site(name=f"waypoint{i}", pos=[x, y, 0.3], size=[0.1, 0, 0], rgba=[0.1, 1.0, 0.1, 0.8])
 
@@ -92,7 +99,7 @@ def regenerate(model: mujoco.MjModel, floor: str, rng: np.random.Generator) -> N
         return
     h = model.hfield(FIELD)
     start = int(h.adr[0])
-    model.hfield_data[start:start + FIELD_RES * FIELD_RES] = field_data(floor, rng)
+    model.hfield_data[start : start + FIELD_RES * FIELD_RES] = field_data(floor, rng)
 
 
 def field_height(model: mujoco.MjModel, x: float, y: float) -> float:

@@ -14,7 +14,7 @@ from d5rl.envs.a1.agents import POLICY_DIR
 from d5rl.errors import D5RLError
 
 
-@functools.lru_cache(maxsize=None)
+@functools.cache
 def agent_log(agent: str, policy_dir: str = str(POLICY_DIR)) -> dict:
     path = Path(policy_dir) / agent / "log.json"
     if not path.exists():

@@ -54,7 +54,7 @@ def calibrate(task_id: str, episodes: int = 20, seed: int = 0) -> dict:
         "per_agent": per_agent,
         "per_agent_speed": per_agent_speed,
         "source": f"d5rl calibrate {task_id} --episodes {episodes} --seed {seed}: mean return of uniform random "
-                  f"actions / of agent '{best_agent}' (final policy, deterministic)",
+        f"actions / of agent '{best_agent}' (final policy, deterministic)",
     }
 
 

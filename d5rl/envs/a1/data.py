@@ -24,8 +24,8 @@ import numpy as np
 
 from d5rl.datasets.episode import Episode
 from d5rl.envs.a1 import rewards
-from d5rl.envs.a1.buffers import agent_log, episode_table
 from d5rl.envs.a1.agents import AGENTS, EPISODE_STEPS, POLICY_DIR, make_env
+from d5rl.envs.a1.buffers import agent_log, episode_table
 from d5rl.envs.a1.policy import SnapshotPolicy
 from d5rl.errors import D5RLError
 
@@ -115,8 +115,13 @@ class ReplayBufferGenerator:
             **{f"infos/{k}": np.asarray(v, np.float32) for k, v in infos.items()},
         }
         seg = agent_log(agent)["segments"][seg_i]
-        meta = {"agent": agent, "agent_target_speed": AGENTS[agent].target_speed, "segment": seg_i,
-                "snapshot": seg["snapshot"] or "random", "training_step": seg["start_step"]}
+        meta = {
+            "agent": agent,
+            "agent_target_speed": AGENTS[agent].target_speed,
+            "segment": seg_i,
+            "snapshot": seg["snapshot"] or "random",
+            "training_step": seg["start_step"],
+        }
         if AGENTS[agent].env_version == 1:  # v0's scenes are the same in every episode
             meta["reset_seed"] = reset_seed
         return Episode(arrays, meta)
@@ -132,8 +137,10 @@ def replay_env(spec, meta: dict, **kwargs):
     env (e.g. ``render_mode``).
     """
     if "reset_seed" not in meta or meta.get("agent") not in AGENTS:
-        raise D5RLError(f"{spec.id}'s episode records no data agent and reset seed to rebuild its scene from",
-                        f"regenerate the dataset: d5rl generate {spec.id} --force")
+        raise D5RLError(
+            f"{spec.id}'s episode records no data agent and reset seed to rebuild its scene from",
+            f"regenerate the dataset: d5rl generate {spec.id} --force",
+        )
     env = make_env(meta["agent"], **kwargs)
     env.reset(seed=int(meta["reset_seed"]))
     return env
@@ -142,13 +149,22 @@ def replay_env(spec, meta: dict, **kwargs):
 def relabel_speed(spec, arrays) -> dict:
     """Rewards of a speed-tracking task (``env_kwargs['target_speed']``) from stored reward terms."""
     target = spec.env_kwargs["target_speed"]
-    r = rewards.speed_reward(np.asarray(arrays["infos/forward_speed"]), np.asarray(arrays["infos/standing"]),
-                             np.asarray(arrays["infos/energy"]), target)
+    r = rewards.speed_reward(
+        np.asarray(arrays["infos/forward_speed"]),
+        np.asarray(arrays["infos/standing"]),
+        np.asarray(arrays["infos/energy"]),
+        target,
+    )
     return {"rewards": r.astype(np.float32)}
 
 
 def relabel_hiking(spec, arrays) -> dict:
     target = spec.env_kwargs["target_speed"]
-    r = rewards.hiking_reward(np.asarray(arrays["infos/forward_speed"]), np.asarray(arrays["infos/standing"]),
-                              np.asarray(arrays["infos/energy"]), np.asarray(arrays["infos/heading_error"]), target)
+    r = rewards.hiking_reward(
+        np.asarray(arrays["infos/forward_speed"]),
+        np.asarray(arrays["infos/standing"]),
+        np.asarray(arrays["infos/energy"]),
+        np.asarray(arrays["infos/heading_error"]),
+        target,
+    )
     return {"rewards": r.astype(np.float32)}

@@ -73,8 +73,10 @@ def describe(task_ids: tuple) -> str:
     last_steps = np.asarray(ds.episode_starts) + np.asarray(ds.episode_lengths) - 1  # each episode's last transition
     names = [get_spec(t).id for t in task_ids]
     out = [f"### `{ds.metadata['dataset']}` (used by {', '.join(f'`{t}`' for t in names)})", ""]
-    out.append(f"- episodes: {ds.num_episodes:,}, transitions: {ds.num_transitions:,}, "
-               f"terminated by a fall: {100 * np.mean(np.asarray(ds.terminals[last_steps], bool)):.1f}% of episodes")
+    out.append(
+        f"- episodes: {ds.num_episodes:,}, transitions: {ds.num_transitions:,}, "
+        f"terminated by a fall: {100 * np.mean(np.asarray(ds.terminals[last_steps], bool)):.1f}% of episodes"
+    )
     speed = np.asarray(ds.arrays["infos/forward_speed"])
     episode_speed = np.bincount(ds.transition_episode, weights=speed) / ds.episode_lengths
     agent = np.array([m["agent"] for m in meta])
@@ -85,8 +87,10 @@ def describe(task_ids: tuple) -> str:
         rand = sum(meta[i]["snapshot"] == "random" for i in sel)
         steps = int(ds.episode_lengths[sel].sum())
         last = sel[segment[sel] == segment[sel].max()]
-        out.append(f"- agent `{a}`: {len(sel)} episodes ({rand} before learning, uniform random actions), {steps:,} steps; "
-                   f"its last snapshot's {len(last)} episodes: mean forward speed {episode_speed[last].mean():.3f} m/s")
+        out.append(
+            f"- agent `{a}`: {len(sel)} episodes ({rand} before learning, uniform random actions), {steps:,} steps; "
+            f"its last snapshot's {len(last)} episodes: mean forward speed {episode_speed[last].mean():.3f} m/s"
+        )
         columns[f"`{a}`"] = speed[agent[ds.transition_episode] == a]
     out.append("")
     out.append("| task | return mean ± std | 10% / 50% / 90% quantile | normalized (mean) |")
@@ -99,8 +103,13 @@ def describe(task_ids: tuple) -> str:
         norm = f"{np.mean((r - s.random) / (s.expert - s.random)):.3f}" if s else "n/a"
         q = np.quantile(r, [0.1, 0.5, 0.9])
         out.append(f"| `{tid}` | {r.mean():.1f} ± {r.std():.1f} | {q[0]:.1f} / {q[1]:.1f} / {q[2]:.1f} | {norm} |")
-    out += ["", "Share of each agent's transitions per training stage (the snapshot that collected them; "
-            "stage 0 is uniform random actions):", "", stage_table(stage_shares(ds))]
+    out += [
+        "",
+        "Share of each agent's transitions per training stage (the snapshot that collected them; "
+        "stage 0 is uniform random actions):",
+        "",
+        stage_table(stage_shares(ds)),
+    ]
     out.append("")
     out.append(speed_histogram(columns))
     return "\n".join(out)

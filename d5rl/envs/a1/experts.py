@@ -95,18 +95,34 @@ class Segment:
     falls: int = 0
 
     def summary(self) -> dict:
-        return {"snapshot": self.snapshot, "start_step": self.start_step, "episodes": self.episodes,
-                "steps": self.steps, "falls": self.falls,
-                "mean_return": float(np.mean(self.returns)) if self.returns else None,
-                "mean_speed": float(np.mean(self.speeds)) if self.speeds else None}
+        return {
+            "snapshot": self.snapshot,
+            "start_step": self.start_step,
+            "episodes": self.episodes,
+            "steps": self.steps,
+            "falls": self.falls,
+            "mean_return": float(np.mean(self.returns)) if self.returns else None,
+            "mean_speed": float(np.mean(self.speeds)) if self.speeds else None,
+        }
 
 
 class Trainer:
     """Several agents of one observation size, trained together; see the module docstring."""
 
-    def __init__(self, agents: list[str], steps: int, seed: int, snapshot_every: int, start_steps: int, utd: int,
-                 work_dir: Path, policy_dir: Path = SAVED_DIR / "policies", init_from: str | None = None,
-                 saved_root: Path | None = None, first_segment: int | None = None):
+    def __init__(
+        self,
+        agents: list[str],
+        steps: int,
+        seed: int,
+        snapshot_every: int,
+        start_steps: int,
+        utd: int,
+        work_dir: Path,
+        policy_dir: Path = SAVED_DIR / "policies",
+        init_from: str | None = None,
+        saved_root: Path | None = None,
+        first_segment: int | None = None,
+    ):
         import jax
 
         dims = {AGENTS[a].obs_dim for a in agents}
@@ -125,10 +141,13 @@ class Trainer:
         self.obs_dim = dims.pop()
         self.k = len(agents)
         n = self.steps
-        self.buf = {"observations": np.zeros((self.k, n, self.obs_dim), np.float32),
-                    "next_observations": np.zeros((self.k, n, self.obs_dim), np.float32),
-                    "actions": np.zeros((self.k, n, 12), np.float32),
-                    "rewards": np.zeros((self.k, n), np.float32), "masks": np.zeros((self.k, n), np.float32)}
+        self.buf = {
+            "observations": np.zeros((self.k, n, self.obs_dim), np.float32),
+            "next_observations": np.zeros((self.k, n, self.obs_dim), np.float32),
+            "actions": np.zeros((self.k, n, 12), np.float32),
+            "rewards": np.zeros((self.k, n), np.float32),
+            "masks": np.zeros((self.k, n), np.float32),
+        }
         self._step_fn = jax.jit(self._fused_step, donate_argnums=0)
 
     # --- learners -----------------------------------------------------------------------------------
@@ -139,8 +158,10 @@ class Trainer:
         from d5rl.agents.rlpd import RLPDAgent
 
         obs = np.zeros((1, self.obs_dim), np.float32)
-        learners = [RLPDAgent.create(self.seed * 1000 + i, obs, np.zeros((1, 12), np.float32), self.config)
-                    for i in range(self.k)]
+        learners = [
+            RLPDAgent.create(self.seed * 1000 + i, obs, np.zeros((1, 12), np.float32), self.config)
+            for i in range(self.k)
+        ]
         if self.init_from is not None:
             data = self._learner_file(self.init_from).read_bytes()
             learners = [learners[i].from_bytes(data) for i in range(self.k)]
@@ -171,8 +192,7 @@ class Trainer:
         import jax
 
         def one(agent, o, k):
-            return jax.numpy.clip(agent.actor.apply_fn({"params": agent.actor.params}, o[None]).sample(k)[0],
-                                  -1, 1)
+            return jax.numpy.clip(agent.actor.apply_fn({"params": agent.actor.params}, o[None]).sample(k)[0], -1, 1)
 
         return jax.vmap(one)(learners, obs, jax.random.split(key, obs.shape[0]))
 
@@ -182,11 +202,20 @@ class Trainer:
 
         from d5rl.training.checkpoint import Checkpoint, save_checkpoint
 
-        state = {"agents": self.names, "t": t, "steps": self.steps, "seed": self.seed, "utd": self.utd,
-                 "snapshot_every": self.snapshot_every, "first_segment": self.first_segment,
-                 "start_steps": self.start_steps, "rng": rng.bit_generator.state, "key": np.asarray(key).tolist(),
-                 "train_seconds": round(seconds),
-                 "segments": [[dataclasses.asdict(s) for s in segs] for segs in segments]}
+        state = {
+            "agents": self.names,
+            "t": t,
+            "steps": self.steps,
+            "seed": self.seed,
+            "utd": self.utd,
+            "snapshot_every": self.snapshot_every,
+            "first_segment": self.first_segment,
+            "start_steps": self.start_steps,
+            "rng": rng.bit_generator.state,
+            "key": np.asarray(key).tolist(),
+            "train_seconds": round(seconds),
+            "segments": [[dataclasses.asdict(s) for s in segs] for segs in segments],
+        }
         buffer = {k: v[:, :t] for k, v in self.buf.items()}
         self.work_dir.mkdir(parents=True, exist_ok=True)
         save_checkpoint(self.work_dir, Checkpoint(flax.serialization.to_bytes(learners), state, buffer))
@@ -202,19 +231,30 @@ class Trainer:
         if ckpt is None:
             return None
         s = {"first_segment": ckpt.state["snapshot_every"], **ckpt.state}  # (uniform segments before it was stored)
-        mine = {"agents": self.names, "seed": self.seed, "utd": self.utd, "snapshot_every": self.snapshot_every,
-                "first_segment": self.first_segment, "start_steps": self.start_steps}
+        mine = {
+            "agents": self.names,
+            "seed": self.seed,
+            "utd": self.utd,
+            "snapshot_every": self.snapshot_every,
+            "first_segment": self.first_segment,
+            "start_steps": self.start_steps,
+        }
         if {k: s[k] for k in mine} != mine:
-            raise ValueError(f"{ckpt.path} holds another training run ({ {k: s[k] for k in mine} }); "
-                             "pass another --work-dir / --saved-dir or delete it")
+            raise ValueError(
+                f"{ckpt.path} holds another training run ({ {k: s[k] for k in mine} }); "
+                "pass another --work-dir / --saved-dir or delete it"
+            )
         t = int(s["t"])
         segments = [[Segment(**d) for d in segs] for segs in s["segments"]]
         if ckpt.buffer:
             for k, v in ckpt.buffer.items():
                 self.buf[k][:, :t] = v
         else:
-            print(f"[{'+'.join(self.names)}] {ckpt.path} has no replay buffer: refilling {t} steps per agent "
-                  "by replaying the snapshots", flush=True)
+            print(
+                f"[{'+'.join(self.names)}] {ckpt.path} has no replay buffer: refilling {t} steps per agent "
+                "by replaying the snapshots",
+                flush=True,
+            )
             refill_buffer(self.buf, t, segments, self.names, self.envs, self.policy_dir, self.seed)
         # training time of the earlier processes (checkpoints from before it was stored: the agents' logs)
         logs = [self.policy_dir / n / "log.json" for n in self.names]
@@ -234,12 +274,20 @@ class Trainer:
     # --- outputs -------------------------------------------------------------------------------------
     def _write_logs(self, segments, t: int, seconds: float) -> None:
         for name, spec, segs in zip(self.names, self.specs, segments):
-            log = {"agent": name, **{k: v for k, v in dataclasses.asdict(spec).items()}, "seed": self.seed,
-                   "steps": t, "utd": self.utd, "start_steps": self.start_steps,
-                   "snapshot_every": self.snapshot_every, "first_segment": self.first_segment,
-                   "train_seconds": round(seconds),
-                   "trained_with": self.names, "config": self.config.to_dict(),
-                   "segments": [s.summary() for s in segs]}
+            log = {
+                "agent": name,
+                **{k: v for k, v in dataclasses.asdict(spec).items()},
+                "seed": self.seed,
+                "steps": t,
+                "utd": self.utd,
+                "start_steps": self.start_steps,
+                "snapshot_every": self.snapshot_every,
+                "first_segment": self.first_segment,
+                "train_seconds": round(seconds),
+                "trained_with": self.names,
+                "config": self.config.to_dict(),
+                "segments": [s.summary() for s in segs],
+            }
             out = self.policy_dir / name
             out.mkdir(parents=True, exist_ok=True)
             (out / "log.json").write_text(json.dumps(log, indent=1, default=str) + "\n")
@@ -277,8 +325,11 @@ class Trainer:
             if self._is_boundary(t) and segments[0][-1].start_step != t:  # (not the one a resume starts at)
                 learners, obs, ep, actions, key = self._boundary(learners, t, rng, key, segments, t0)
                 if max_minutes is not None and time.time() - t0 > 60 * max_minutes:
-                    print(f"[{'+'.join(self.names)}] stopping at step {t} after {max_minutes} min; "
-                          "run the same command to continue", flush=True)
+                    print(
+                        f"[{'+'.join(self.names)}] stopping at step {t} after {max_minutes} min; "
+                        "run the same command to continue",
+                        flush=True,
+                    )
                     return False
             if t < self.start_steps or actions is None:
                 if t < self.start_steps:
@@ -305,8 +356,10 @@ class Trainer:
             t += 1
             if t > self.start_steps:
                 idx = rng.integers(0, t, (self.k, self.utd * 256))
-                batch = {k: np.take_along_axis(v, idx.reshape(idx.shape + (1,) * (v.ndim - 2)), axis=1)
-                         for k, v in self.buf.items()}
+                batch = {
+                    k: np.take_along_axis(v, idx.reshape(idx.shape + (1,) * (v.ndim - 2)), axis=1)
+                    for k, v in self.buf.items()
+                }
                 key, sub = jax.random.split(key)
                 learners, _, actions = self._step_fn(learners, batch, obs, sub)
                 actions = np.asarray(actions)
@@ -334,7 +387,7 @@ class Trainer:
         """Snapshot, close the segment, checkpoint, reset every environment."""
         import flax
 
-        for i, spec in enumerate(self.specs):
+        for i in range(len(self.specs)):
             if final:
                 self._snapshot(learners, i, "final.npz")
             else:  # reference agents' snapshots too: a resume rebuilds the replay buffer from them
@@ -371,34 +424,54 @@ def main(argv=None) -> None:
     q.add_argument("--steps", type=int, default=150_000, help="environment steps per agent")
     q.add_argument("--seed", type=int, default=0)
     q.add_argument("--snapshot-every", type=int, default=15_000, help="the longest segment between snapshots")
-    q.add_argument("--first-segment", type=int,
-                   help="steps of the first learning segment; each next one doubles up to --snapshot-every "
-                        "(default: --snapshot-every, uniform segments)")
+    q.add_argument(
+        "--first-segment",
+        type=int,
+        help="steps of the first learning segment; each next one doubles up to --snapshot-every "
+        "(default: --snapshot-every, uniform segments)",
+    )
     q.add_argument("--start-steps", type=int, default=5_000, help="uniform random steps before learning")
     q.add_argument("--utd", type=int, default=2)
     q.add_argument("--init-from", choices=sorted(AGENTS), help="start from this agent's final learner")
     q.add_argument("--work-dir", type=Path, help=f"checkpoints (default {WORK_DIR}/<agents>)")
-    q.add_argument("--policy-dir", type=Path, default=SAVED_DIR / "policies",
-                   help=f"snapshots and logs (default %(default)s; published to {POLICY_DIR} when trained)")
-    q.add_argument("--saved-dir", type=Path, default=SAVED_DIR,
-                   help="exported checkpoints to resume from when --work-dir has none (default %(default)s)")
+    q.add_argument(
+        "--policy-dir",
+        type=Path,
+        default=SAVED_DIR / "policies",
+        help=f"snapshots and logs (default %(default)s; published to {POLICY_DIR} when trained)",
+    )
+    q.add_argument(
+        "--saved-dir",
+        type=Path,
+        default=SAVED_DIR,
+        help="exported checkpoints to resume from when --work-dir has none (default %(default)s)",
+    )
     q.add_argument("--max-minutes", type=float, help="stop at the first snapshot boundary after this long")
     q.add_argument("--log-every", type=int, default=5000)
-    q.add_argument("--single-thread", action="store_true",
-                   help="one compute thread (faster when several trainings share the cores)")
+    q.add_argument(
+        "--single-thread",
+        action="store_true",
+        help="one compute thread (faster when several trainings share the cores)",
+    )
     e = sub.add_parser("export", help="copy the latest checkpoints (without replay buffers) for committing")
     e.add_argument("--work-root", type=Path, default=WORK_DIR)
     e.add_argument("--saved-dir", type=Path, default=SAVED_DIR)
     c = sub.add_parser("check", help="mean forward speed and falls of each agent's final policy")
-    c.add_argument("--agents", nargs="+", choices=sorted(AGENTS),
-                   help="default: every agent with a final policy in --policy-dir")
+    c.add_argument(
+        "--agents", nargs="+", choices=sorted(AGENTS), help="default: every agent with a final policy in --policy-dir"
+    )
     c.add_argument("--episodes", type=int, default=10)
     c.add_argument("--seed", type=int, default=0)
-    c.add_argument("--policy-dir", type=Path, default=POLICY_DIR,
-                   help=f"whose final policies (default: the shipped ones; {SAVED_DIR / 'policies'}: the trained ones)")
+    c.add_argument(
+        "--policy-dir",
+        type=Path,
+        default=POLICY_DIR,
+        help=f"whose final policies (default: the shipped ones; {SAVED_DIR / 'policies'}: the trained ones)",
+    )
     p = sub.add_parser("publish", help=f"ship finished agents' policies to {POLICY_DIR} (the datasets replay them)")
-    p.add_argument("--agents", nargs="+", choices=sorted(AGENTS),
-                   help="default: every agent with a final policy in --policy-dir")
+    p.add_argument(
+        "--agents", nargs="+", choices=sorted(AGENTS), help="default: every agent with a final policy in --policy-dir"
+    )
     p.add_argument("--policy-dir", type=Path, default=SAVED_DIR / "policies")
     args = ap.parse_args(argv)
     if args.cmd == "train":
@@ -407,13 +480,25 @@ def main(argv=None) -> None:
 
             configure_worker(single_thread=True)
         work = args.work_dir or WORK_DIR / "+".join(args.agents)
-        Trainer(args.agents, args.steps, args.seed, args.snapshot_every, args.start_steps, args.utd, work,
-                args.policy_dir, args.init_from, args.saved_dir, args.first_segment).run(args.max_minutes, args.log_every)
+        Trainer(
+            args.agents,
+            args.steps,
+            args.seed,
+            args.snapshot_every,
+            args.start_steps,
+            args.utd,
+            work,
+            args.policy_dir,
+            args.init_from,
+            args.saved_dir,
+            args.first_segment,
+        ).run(args.max_minutes, args.log_every)
     elif args.cmd == "export":
         export(args.work_root, args.saved_dir)
     elif args.cmd == "publish":
-        publish(args.agents or [a for a in sorted(AGENTS) if (args.policy_dir / a / "final.npz").exists()],
-                args.policy_dir)
+        publish(
+            args.agents or [a for a in sorted(AGENTS) if (args.policy_dir / a / "final.npz").exists()], args.policy_dir
+        )
     else:
         from d5rl.envs.a1.speedcheck import main as check
 

@@ -85,10 +85,12 @@ def build_spec(course: Course | None = None) -> mujoco.MjSpec:
     trunk = spec.body("trunk")
     trunk.add_site(name="imu", pos=[0, 0, 0], size=[0.01, 0, 0])
     spec.add_sensor(name="gyro", type=mujoco.mjtSensor.mjSENS_GYRO, objtype=mujoco.mjtObj.mjOBJ_SITE, objname="imu")
-    spec.add_sensor(name="velocimeter", type=mujoco.mjtSensor.mjSENS_VELOCIMETER,
-                    objtype=mujoco.mjtObj.mjOBJ_SITE, objname="imu")
-    trunk.add_camera(name="track", mode=mujoco.mjtCamLight.mjCAMLIGHT_TRACKCOM, pos=[0.0, -2.0, 0.6],
-                     xyaxes=[1, 0, 0, 0, 0.3, 1])
+    spec.add_sensor(
+        name="velocimeter", type=mujoco.mjtSensor.mjSENS_VELOCIMETER, objtype=mujoco.mjtObj.mjOBJ_SITE, objname="imu"
+    )
+    trunk.add_camera(
+        name="track", mode=mujoco.mjtCamLight.mjCAMLIGHT_TRACKCOM, pos=[0.0, -2.0, 0.6], xyaxes=[1, 0, 0, 0, 0.3, 1]
+    )
     spec.visual.global_.offwidth = 640
     spec.visual.global_.offheight = 480
     if course is not None:
@@ -104,15 +106,24 @@ def _add_course(spec: mujoco.MjSpec, course: Course) -> None:
     span = max(hi - lo, 1e-3)
     nrow, ncol = h.shape
     half_x = (course.x_range[1] - course.x_range[0]) / 2
-    spec.add_hfield(name="course", size=[half_x, course.y_half_width, span, 0.5], nrow=nrow, ncol=ncol,
-                    userdata=((h - lo) / span).ravel().tolist())
+    spec.add_hfield(
+        name="course",
+        size=[half_x, course.y_half_width, span, 0.5],
+        nrow=nrow,
+        ncol=ncol,
+        userdata=((h - lo) / span).ravel().tolist(),
+    )
     spec.worldbody.add_geom(
-        name="terrain", type=mujoco.mjtGeom.mjGEOM_HFIELD, hfieldname="course", material="groundplane",
+        name="terrain",
+        type=mujoco.mjtGeom.mjGEOM_HFIELD,
+        hfieldname="course",
+        material="groundplane",
         pos=[(course.x_range[0] + course.x_range[1]) / 2, 0.0, lo],
     )
     for i, wx in enumerate(course.waypoints):
-        spec.worldbody.add_site(name=f"waypoint{i}", pos=[wx, 0.0, course.height_at(wx) + 0.3],
-                                size=[0.08, 0, 0], rgba=[1.0, 0.4, 0.1, 0.8])
+        spec.worldbody.add_site(
+            name=f"waypoint{i}", pos=[wx, 0.0, course.height_at(wx) + 0.3], size=[0.08, 0, 0], rgba=[1.0, 0.4, 0.1, 0.8]
+        )
 
 
 def build_model(course: Course | None = None) -> mujoco.MjModel:
@@ -129,7 +140,7 @@ class Indices:
     velocimeter: slice
 
     @classmethod
-    def of(cls, model: mujoco.MjModel) -> "Indices":
+    def of(cls, model: mujoco.MjModel) -> Indices:
         qpos = np.array([model.jnt_qposadr[model.joint(j).id] for j in JOINTS])
         qvel = np.array([model.jnt_dofadr[model.joint(j).id] for j in JOINTS])
 

@@ -51,8 +51,9 @@ class SnapshotPolicy:
         return np.tanh(mu + np.exp(log_std) * rng.standard_normal(self.action_dim)).astype(np.float32)
 
 
-def run_episodes(env, policy: SnapshotPolicy, episodes: int, seed: int, deterministic: bool = True,
-                 max_steps: int | None = None) -> dict[str, list]:
+def run_episodes(
+    env, policy: SnapshotPolicy, episodes: int, seed: int, deterministic: bool = True, max_steps: int | None = None
+) -> dict[str, list]:
     """Roll ``policy`` on ``env`` (an A1 task or a data agent's training env) for ``episodes`` episodes.
 
     Episode ``i`` resets with seed ``seed * 100_003 + i``; the policy's noise comes from
@@ -70,8 +71,12 @@ def run_episodes(env, policy: SnapshotPolicy, episodes: int, seed: int, determin
             obs, r, term, trunc, info = env.step(policy(obs, rng, deterministic=deterministic))
             total += r
             speeds.append(info["forward_speed"])
-        for k, v in (("returns", total), ("speeds", float(np.mean(speeds))), ("lengths", len(speeds)),
-                     ("falls", bool(term))):
+        for k, v in (
+            ("returns", total),
+            ("speeds", float(np.mean(speeds))),
+            ("lengths", len(speeds)),
+            ("falls", bool(term)),
+        ):
             out[k].append(v)
     return out
 

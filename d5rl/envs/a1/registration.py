@@ -23,16 +23,22 @@ def _ref(task_id: str, scores: dict) -> ScoreRef | None:
     if s is None:
         return None
     trained = f" ({s['expert_trained']})" if "expert_trained" in s else ""
-    note = (f"'{s['expert_agent']}'{trained} runs {s['expert_speed']:.2f} m/s on average on this task"
-            if "expert_speed" in s else "")
+    note = (
+        f"'{s['expert_agent']}'{trained} runs {s['expert_speed']:.2f} m/s on average on this task"
+        if "expert_speed" in s
+        else ""
+    )
     return ScoreRef(s["random"], s["expert"], s["source"], expert_note=note)
 
 
 SPEED_AGENTS = ("speed-0.5", "speed-0.8", "speed-1.0")  # data agents (agents.AGENTS says what each does)
 HIKING_AGENTS = ("heading",)
 # the agents each task's expert reference is the best of: its data agents and the reference agents trained for it
-SCORE_AGENTS = {"a1-walk-v0": SPEED_AGENTS + ("run-1.25",), "a1-run-v0": SPEED_AGENTS + ("run-1.25",),
-                "a1-hiking-v0": HIKING_AGENTS + ("hiking",)}
+SCORE_AGENTS = {
+    "a1-walk-v0": SPEED_AGENTS + ("run-1.25",),
+    "a1-run-v0": SPEED_AGENTS + ("run-1.25",),
+    "a1-hiking-v0": HIKING_AGENTS + ("hiking",),
+}
 
 LOCOMOTION_DATA = DatasetSpec(
     name="a1-locomotion",
@@ -42,8 +48,8 @@ LOCOMOTION_DATA = DatasetSpec(
     episodes_per_shard=8,
     generator_kwargs={"agents": SPEED_AGENTS},
     description="replay buffers of three SAC agents trained to track 0.5, 0.8 and 1.0 m/s "
-                "(deterministic: 0.52, 0.82 and 0.88 m/s), "
-                "first exploration to expert, replayed from committed policy snapshots",
+    "(deterministic: 0.52, 0.82 and 0.88 m/s), "
+    "first exploration to expert, replayed from committed policy snapshots",
 )
 HIKING_DATA = DatasetSpec(
     name="a1-hiking",
@@ -57,41 +63,50 @@ HIKING_DATA = DatasetSpec(
 
 _scores_table = _scores()
 for task_id, speed, dataset in (("a1-walk-v0", 0.75, LOCOMOTION_DATA), ("a1-run-v0", 1.25, LOCOMOTION_DATA)):
-    register(TaskSpec(
-        id=task_id,
+    register(
+        TaskSpec(
+            id=task_id,
+            entry_point=ENTRY,
+            max_episode_steps=400,
+            env_kwargs={"target_speed": speed},
+            description=f"Unitree A1 tracking {speed} m/s on flat ground (20 Hz PD position control)",
+            dataset=dataset,
+            relabel="d5rl.envs.a1.data:relabel_speed",
+            score=_ref(task_id, _scores_table),
+            score_definition="(return - random policy return) / (expert return - random policy return); "
+            "expert = the best of the data agents and the reference agent run-1.25 "
+            "(trained on the run task), evaluated on this task (d5rl calibrate)",
+            group="a1",
+        )
+    )
+register(
+    TaskSpec(
+        id="a1-hiking-v0",
         entry_point=ENTRY,
-        max_episode_steps=400,
-        env_kwargs={"target_speed": speed},
-        description=f"Unitree A1 tracking {speed} m/s on flat ground (20 Hz PD position control)",
-        dataset=dataset,
-        relabel="d5rl.envs.a1.data:relabel_speed",
-        score=_ref(task_id, _scores_table),
+        max_episode_steps=1000,
+        env_kwargs={"target_speed": 0.75, "terrain": "course", "command": "waypoints"},
+        description="Unitree A1 walking a generated hiking course (bumps, ramps, waypoints); data from flat ground",
+        dataset=HIKING_DATA,
+        relabel="d5rl.envs.a1.data:relabel_hiking",
+        score=_ref("a1-hiking-v0", _scores_table),
         score_definition="(return - random policy return) / (expert return - random policy return); "
-                         "expert = the best of the data agents and the reference agent run-1.25 "
-                         "(trained on the run task), evaluated on this task (d5rl calibrate)",
+        "expert = the best of the data agent 'heading' and the reference agent 'hiking' "
+        "(trained on the course), evaluated on the course (d5rl calibrate)",
         group="a1",
-    ))
-register(TaskSpec(
-    id="a1-hiking-v0",
-    entry_point=ENTRY,
-    max_episode_steps=1000,
-    env_kwargs={"target_speed": 0.75, "terrain": "course", "command": "waypoints"},
-    description="Unitree A1 walking a generated hiking course (bumps, ramps, waypoints); data from flat ground",
-    dataset=HIKING_DATA,
-    relabel="d5rl.envs.a1.data:relabel_hiking",
-    score=_ref("a1-hiking-v0", _scores_table),
-    score_definition="(return - random policy return) / (expert return - random policy return); "
-                     "expert = the best of the data agent 'heading' and the reference agent 'hiking' "
-                     "(trained on the course), evaluated on the course (d5rl calibrate)",
-    group="a1",
-))
+    )
+)
 
 # v1: the release's action range, reward, start and hiking course (d5rl.envs.a1.v1).  Their datasets replay
 # the v1 data agents, which must be trained and published first (d5rl.envs.a1.experts).
 SPEED_AGENTS_V1 = ("speed-0.5-v1", "speed-0.8-v1", "speed-1.0-v1")
 HIKING_AGENTS_V1 = ("goals-mixed-v1",)
-SCORE_AGENTS.update({"a1-walk-v1": SPEED_AGENTS_V1 + ("run-1.25-v1",), "a1-run-v1": SPEED_AGENTS_V1 + ("run-1.25-v1",),
-                     "a1-hiking-v1": ("goals-mixed-v1", "goals-smooth-v1", "hiking-v1")})
+SCORE_AGENTS.update(
+    {
+        "a1-walk-v1": SPEED_AGENTS_V1 + ("run-1.25-v1",),
+        "a1-run-v1": SPEED_AGENTS_V1 + ("run-1.25-v1",),
+        "a1-hiking-v1": ("goals-mixed-v1", "goals-smooth-v1", "hiking-v1"),
+    }
+)
 TRAIN_V1 = "python -m d5rl.envs.a1.experts train --agents {agents} (then `publish`; docs/datacards/a1.md, v1)"
 
 
@@ -111,7 +126,7 @@ LOCOMOTION_DATA_V1 = DatasetSpec(
     episodes_per_shard=8,
     generator_kwargs={"agents": SPEED_AGENTS_V1},
     description="replay buffers of three SAC agents trained on the release's run task to track 0.5, 0.8 "
-                "and 1.0 m/s, first exploration to expert, replayed from committed policy snapshots",
+    "and 1.0 m/s, first exploration to expert, replayed from committed policy snapshots",
     unavailable=_unavailable(SPEED_AGENTS_V1),
     numerics="portable",
     replay=REPLAY_V1,
@@ -124,7 +139,7 @@ HIKING_DATA_V1 = DatasetSpec(
     episodes_per_shard=8,
     generator_kwargs={"agents": HIKING_AGENTS_V1},
     description="replay buffer of a SAC agent running toward random goals (the release's RunToward: "
-                "smooth and bumpy floors)",
+    "smooth and bumpy floors)",
     unavailable=_unavailable(HIKING_AGENTS_V1),
     numerics="portable",
     replay=REPLAY_V1,
@@ -133,34 +148,41 @@ HIKING_DATA_V1 = DatasetSpec(
 # the course on each decides which agent's buffer is a1-v1-hiking (docs/datacards/a1.md, v1).
 HIKING_SMOOTH_AGENTS_V1 = ("goals-smooth-v1",)
 HIKING_SMOOTH_DATA_V1 = dataclasses.replace(
-    HIKING_DATA_V1, name="a1-v1-hiking-smooth", num_episodes=num_episodes(HIKING_SMOOTH_AGENTS_V1),
+    HIKING_DATA_V1,
+    name="a1-v1-hiking-smooth",
+    num_episodes=num_episodes(HIKING_SMOOTH_AGENTS_V1),
     generator_kwargs={"agents": HIKING_SMOOTH_AGENTS_V1},
     description="replay buffer of a SAC agent running toward random goals on the plane (the release's "
-                "RunToward, smooth floor only)",
-    unavailable=_unavailable(HIKING_SMOOTH_AGENTS_V1))
+    "RunToward, smooth floor only)",
+    unavailable=_unavailable(HIKING_SMOOTH_AGENTS_V1),
+)
 for task_id, speed in (("a1-walk-v1", 0.75), ("a1-run-v1", 1.25)):
-    register(TaskSpec(
-        id=task_id,
+    register(
+        TaskSpec(
+            id=task_id,
+            entry_point=ENTRY_V1,
+            max_episode_steps=400,
+            env_kwargs={"task": "run", "target_speed": speed},
+            description=f"Unitree A1 tracking {speed} m/s on flat ground, as the D5RL release defines it",
+            dataset=LOCOMOTION_DATA_V1,
+            relabel="d5rl.envs.a1.data:relabel_speed",
+            score=_ref(task_id, _scores_table),
+            score_definition="(return - random policy return) / (expert return - random policy return)",
+            group="a1",
+        )
+    )
+register(
+    TaskSpec(
+        id="a1-hiking-v1",
         entry_point=ENTRY_V1,
-        max_episode_steps=400,
-        env_kwargs={"task": "run", "target_speed": speed},
-        description=f"Unitree A1 tracking {speed} m/s on flat ground, as the D5RL release defines it",
-        dataset=LOCOMOTION_DATA_V1,
-        relabel="d5rl.envs.a1.data:relabel_speed",
-        score=_ref(task_id, _scores_table),
+        max_episode_steps=1000,
+        env_kwargs={"task": "hiking", "target_speed": 1.0},
+        description="Unitree A1 hiking the release's course (redrawn per episode) through four waypoints at 1 m/s",
+        dataset=HIKING_DATA_V1,
+        dataset_variants={"smooth": HIKING_SMOOTH_DATA_V1},  # a1-hiking-smooth-v1
+        relabel="d5rl.envs.a1.data:relabel_hiking",
+        score=_ref("a1-hiking-v1", _scores_table),
         score_definition="(return - random policy return) / (expert return - random policy return)",
         group="a1",
-    ))
-register(TaskSpec(
-    id="a1-hiking-v1",
-    entry_point=ENTRY_V1,
-    max_episode_steps=1000,
-    env_kwargs={"task": "hiking", "target_speed": 1.0},
-    description="Unitree A1 hiking the release's course (redrawn per episode) through four waypoints at 1 m/s",
-    dataset=HIKING_DATA_V1,
-    dataset_variants={"smooth": HIKING_SMOOTH_DATA_V1},  # a1-hiking-smooth-v1
-    relabel="d5rl.envs.a1.data:relabel_hiking",
-    score=_ref("a1-hiking-v1", _scores_table),
-    score_definition="(return - random policy return) / (expert return - random policy return)",
-    group="a1",
-))
+    )
+)

@@ -61,8 +61,10 @@ def publish(agents, trained_dir: Path = SAVED_DIR / "policies", dest: Path = POL
     for name in agents:
         src = Path(trained_dir) / name
         if not (src / "final.npz").exists():
-            raise D5RLError(f"{name} has not finished training ({src / 'final.npz'} is missing)",
-                            "train it to its --steps first (python -m d5rl.envs.a1.experts train ...)")
+            raise D5RLError(
+                f"{name} has not finished training ({src / 'final.npz'} is missing)",
+                "train it to its --steps first (python -m d5rl.envs.a1.experts train ...)",
+            )
     for name in agents:
         src, out = Path(trained_dir) / name, Path(dest) / name
         files = sorted(src.glob("*.npz")) if AGENTS[name].role == "data" else [src / "final.npz"]

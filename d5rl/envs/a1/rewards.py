@@ -69,5 +69,7 @@ def heading_term(heading_error):
 
 
 def hiking_reward(forward_speed, standing, energy, heading_error, target, energy_coef=HIKING_ENERGY_COEF):
-    return (SPEED_REWARD_SCALE * speed_term(forward_speed, target) * standing * heading_term(heading_error)
-            - energy_coef * energy)
+    return (
+        SPEED_REWARD_SCALE * speed_term(forward_speed, target) * standing * heading_term(heading_error)
+        - energy_coef * energy
+    )

@@ -28,8 +28,14 @@ def rollouts(agent: str, episodes: int, seed: int, deterministic: bool, policy_d
 
     env = make_env(agent)
     try:
-        return run_episodes(env, SnapshotPolicy(Path(policy_dir) / agent / "final.npz"), episodes, seed,
-                            deterministic, max_steps=AGENTS[agent].episode_steps)
+        return run_episodes(
+            env,
+            SnapshotPolicy(Path(policy_dir) / agent / "final.npz"),
+            episodes,
+            seed,
+            deterministic,
+            max_steps=AGENTS[agent].episode_steps,
+        )
     finally:
         env.close()
 
@@ -43,19 +49,33 @@ def check(agent: str, episodes: int = 10, seed: int = 0, policy_dir: Path = POLI
         r = rollouts(agent, episodes, seed, mode == "deterministic", policy_dir)
         mean = float(np.mean(r["speeds"]))
         err = (mean - target) / target
-        rows.append({"agent": agent, "mode": mode, "target": target, "mean_speed": mean,
-                     "speed_std": float(np.std(r["speeds"])), "error": err, "falls": int(sum(r["falls"])),
-                     "episodes": episodes, "meets_bar": bool(abs(err) <= BAR and not any(r["falls"]))})
+        rows.append(
+            {
+                "agent": agent,
+                "mode": mode,
+                "target": target,
+                "mean_speed": mean,
+                "speed_std": float(np.std(r["speeds"])),
+                "error": err,
+                "falls": int(sum(r["falls"])),
+                "episodes": episodes,
+                "meets_bar": bool(abs(err) <= BAR and not any(r["falls"])),
+            }
+        )
     return rows
 
 
 def main(agents, episodes: int = 10, seed: int = 0, policy_dir: Path = POLICY_DIR) -> list[dict]:
     rows = [row for a in agents for row in check(a, episodes, seed, policy_dir)]
-    print(f"final policies in {policy_dir}, {episodes} episodes per agent and mode, seeds {seed * 100_003}..; "
-          "speed = mean forward speed over whole episodes (m/s)\n")
+    print(
+        f"final policies in {policy_dir}, {episodes} episodes per agent and mode, seeds {seed * 100_003}..; "
+        "speed = mean forward speed over whole episodes (m/s)\n"
+    )
     print("| agent | policy | target | mean speed ± std over episodes | error | falls | within 5%, no falls |")
     print("|---|---|---:|---|---:|---:|:---:|")
     for r in rows:
-        print(f"| `{r['agent']}` | {r['mode']} | {r['target']:.2f} | {r['mean_speed']:.3f} ± {r['speed_std']:.3f} "
-              f"| {100 * r['error']:+.1f}% | {r['falls']}/{r['episodes']} | {'yes' if r['meets_bar'] else 'no'} |")
+        print(
+            f"| `{r['agent']}` | {r['mode']} | {r['target']:.2f} | {r['mean_speed']:.3f} ± {r['speed_std']:.3f} "
+            f"| {100 * r['error']:+.1f}% | {r['falls']}/{r['episodes']} | {'yes' if r['meets_bar'] else 'no'} |"
+        )
     return rows

@@ -7,8 +7,7 @@ import mujoco
 import numpy as np
 
 from d5rl.envs.a1 import rewards
-from d5rl.envs.a1.model import (ACTION_SCALE, CONTROL_DT, NOMINAL_POSE, PHYSICS_DT, A1State, Course, Indices,
-                                build_model)
+from d5rl.envs.a1.model import ACTION_SCALE, CONTROL_DT, NOMINAL_POSE, PHYSICS_DT, A1State, Course, Indices, build_model
 from d5rl.envs.base import MujocoEnv
 
 MAX_TILT = np.deg2rad(60.0)
@@ -84,8 +83,15 @@ class A1Env(A1State, MujocoEnv):
         if command == "waypoints" and terrain != "course":
             raise ValueError("command='waypoints' needs terrain='course'")
         self.course = Course(seed=course_seed) if terrain == "course" else None
-        super().__init__(build_model(self.course), frame_skip=round(CONTROL_DT / PHYSICS_DT),
-                         render_mode=render_mode, render_size=render_size, render_camera="track", width=width, height=height)
+        super().__init__(
+            build_model(self.course),
+            frame_skip=round(CONTROL_DT / PHYSICS_DT),
+            render_mode=render_mode,
+            render_size=render_size,
+            render_camera="track",
+            width=width,
+            height=height,
+        )
         self.target_speed = float(target_speed)
         self.command = command
         self.heading_change_steps = int(heading_change_steps)
@@ -100,7 +106,6 @@ class A1Env(A1State, MujocoEnv):
         self._heading = 0.0
         self._waypoint = 0
         self._t = 0
-
 
     # --- task -------------------------------------------------------------------------------------
     def _desired_heading(self) -> float:
@@ -117,8 +122,15 @@ class A1Env(A1State, MujocoEnv):
         return float(_wrap(self._desired_heading() - yaw))
 
     def _obs(self) -> np.ndarray:
-        parts = [self.joint_pos(), self.joint_vel(), self.torques(), self.data.sensordata[self.idx.gyro],
-                 self.local_velocity(), self.body_quat(), self._prev_action]
+        parts = [
+            self.joint_pos(),
+            self.joint_vel(),
+            self.torques(),
+            self.data.sensordata[self.idx.gyro],
+            self.local_velocity(),
+            self.body_quat(),
+            self._prev_action,
+        ]
         if self.command != "forward":
             err = self._heading_error()
             parts.append([np.sin(err), np.cos(err)])
@@ -154,8 +166,12 @@ class A1Env(A1State, MujocoEnv):
             reward = rewards.speed_reward(forward, standing, energy, self.target_speed, self.energy_coef)
         else:
             reward = rewards.hiking_reward(forward, standing, energy, heading_error, self.target_speed)
-        return float(reward), {"forward_speed": forward, "standing": standing, "energy": energy,
-                               "heading_error": heading_error}
+        return float(reward), {
+            "forward_speed": forward,
+            "standing": standing,
+            "energy": energy,
+            "heading_error": heading_error,
+        }
 
     def step(self, action):
         action = self.check_action(action)
@@ -165,8 +181,10 @@ class A1Env(A1State, MujocoEnv):
         if self.command == "heading" and self._t % self.heading_change_steps == 0:
             self._heading = float(_wrap(self._heading + self.np_random.uniform(-np.pi / 2, np.pi / 2)))
         if self.command == "waypoints":
-            while (self._waypoint < len(self.course.waypoints)
-                   and self.data.qpos[0] >= self.course.waypoints[self._waypoint] - WAYPOINT_TOLERANCE):
+            while (
+                self._waypoint < len(self.course.waypoints)
+                and self.data.qpos[0] >= self.course.waypoints[self._waypoint] - WAYPOINT_TOLERANCE
+            ):
                 self._waypoint += 1
 
         reward, terms = self.reward_terms()

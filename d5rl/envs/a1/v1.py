@@ -13,8 +13,7 @@ import mujoco
 import numpy as np
 
 from d5rl.envs.a1 import arenas, rewards
-from d5rl.envs.a1.model import (ACTION_SCALE, CONTROL_DT, JOINTS, NOMINAL_POSE, PHYSICS_DT, A1State, Indices,
-                                build_spec)
+from d5rl.envs.a1.model import ACTION_SCALE, CONTROL_DT, JOINTS, NOMINAL_POSE, PHYSICS_DT, A1State, Indices, build_spec
 from d5rl.envs.base import MujocoEnv
 
 ACTION_RANGE = 3.0  # joint targets span nominal ± ACTION_RANGE × ACTION_SCALE (the release's ACTION_OFFSET)
@@ -72,28 +71,33 @@ class Task:
     def start_xy(self) -> tuple[float, float]:
         return 0.0, 0.0
 
-    def initialize_episode(self, env: "A1EnvV1", rng: np.random.Generator) -> None:
+    def initialize_episode(self, env: A1EnvV1, rng: np.random.Generator) -> None:
         arenas.regenerate(env.model, self.floor, rng)
 
-    def after_step(self, env: "A1EnvV1", rng: np.random.Generator) -> None:
+    def after_step(self, env: A1EnvV1, rng: np.random.Generator) -> None:
         pass
 
-    def heading_error(self, env: "A1EnvV1") -> float:
+    def heading_error(self, env: A1EnvV1) -> float:
         return 0.0
 
-    def forward_speed(self, env: "A1EnvV1") -> float:
+    def forward_speed(self, env: A1EnvV1) -> float:
         _, pitch, yaw = euler_xyz(env.body_quat())
         return float(env.local_velocity()[0] * np.cos(pitch) * np.cos(yaw))
 
-    def reward(self, env: "A1EnvV1") -> tuple[float, dict]:
-        terms = {"forward_speed": self.forward_speed(env),
-                 "standing": float(rewards.standing_term_v1(env.upright(), env.joint_pos())),
-                 "energy": float(np.sum(env.joint_vel() * env.torques())),  # signed, as the release
-                 "heading_error": self.heading_error(env)}
-        return float(rewards.speed_reward(terms["forward_speed"], terms["standing"], terms["energy"],
-                                          self.target_speed, self.energy_coef)), terms
+    def reward(self, env: A1EnvV1) -> tuple[float, dict]:
+        terms = {
+            "forward_speed": self.forward_speed(env),
+            "standing": float(rewards.standing_term_v1(env.upright(), env.joint_pos())),
+            "energy": float(np.sum(env.joint_vel() * env.torques())),  # signed, as the release
+            "heading_error": self.heading_error(env),
+        }
+        return float(
+            rewards.speed_reward(
+                terms["forward_speed"], terms["standing"], terms["energy"], self.target_speed, self.energy_coef
+            )
+        ), terms
 
-    def failed(self, env: "A1EnvV1") -> bool:
+    def failed(self, env: A1EnvV1) -> bool:
         return False
 
     def stats(self) -> dict:
@@ -160,8 +164,16 @@ class RunToward(Task):
 
     def reward(self, env):
         _, terms = super().reward(env)
-        return float(rewards.hiking_reward(terms["forward_speed"], terms["standing"], terms["energy"],
-                                           terms["heading_error"], self.target_speed, self.energy_coef)), terms
+        return float(
+            rewards.hiking_reward(
+                terms["forward_speed"],
+                terms["standing"],
+                terms["energy"],
+                terms["heading_error"],
+                self.target_speed,
+                self.energy_coef,
+            )
+        ), terms
 
     def stats(self) -> dict:
         return {"bumpy_floor": float(self.bumpy)}
@@ -254,9 +266,16 @@ class A1EnvV1(A1State, MujocoEnv):
 
     metadata = {"render_modes": ["rgb_array"], "render_fps": 20}
 
-    def __init__(self, task: str = "run", target_speed: float | None = None, render_mode: str | None = None,
-                 render_size: tuple[int, int] = (240, 320), width: int | None = None, height: int | None = None,
-                 **task_kwargs):
+    def __init__(
+        self,
+        task: str = "run",
+        target_speed: float | None = None,
+        render_mode: str | None = None,
+        render_size: tuple[int, int] = (240, 320),
+        width: int | None = None,
+        height: int | None = None,
+        **task_kwargs,
+    ):
         if task not in TASKS:
             raise ValueError(f"task must be one of {sorted(TASKS)}, got {task!r}")
         self.task = TASKS[task](target_speed, **task_kwargs)
@@ -264,8 +283,15 @@ class A1EnvV1(A1State, MujocoEnv):
         spec.option.noslip_iterations = NOSLIP_ITERATIONS
         spec.option.noslip_tolerance = NOSLIP_TOLERANCE
         arenas.add_floor(spec, self.task.floor)
-        super().__init__(spec.compile(), frame_skip=round(CONTROL_DT / PHYSICS_DT), render_mode=render_mode,
-                         render_size=render_size, render_camera="track", width=width, height=height)
+        super().__init__(
+            spec.compile(),
+            frame_skip=round(CONTROL_DT / PHYSICS_DT),
+            render_mode=render_mode,
+            render_size=render_size,
+            render_camera="track",
+            width=width,
+            height=height,
+        )
         self.target_speed = self.task.target_speed
         self.idx = Indices.of(self.model)
         self.trunk_id = self.model.body("trunk").id
@@ -277,7 +303,6 @@ class A1EnvV1(A1State, MujocoEnv):
         self._t = 0
         self._speed_sum = 0.0
 
-
     def joint_targets(self, action) -> np.ndarray:
         """Joint targets of an action in [-1, 1] (linear onto :func:`action_box`)."""
         a = np.asarray(action, dtype=np.float64)
@@ -285,8 +310,15 @@ class A1EnvV1(A1State, MujocoEnv):
 
     # --- episode -------------------------------------------------------------------------------
     def _obs(self) -> np.ndarray:
-        parts = [self.joint_pos(), self.joint_vel(), self.torques(), self.data.sensordata[self.idx.gyro],
-                 self.local_velocity(), self.body_quat(), self._prev_action]
+        parts = [
+            self.joint_pos(),
+            self.joint_vel(),
+            self.torques(),
+            self.data.sensordata[self.idx.gyro],
+            self.local_velocity(),
+            self.body_quat(),
+            self._prev_action,
+        ]
         if self.task.directed:
             err = self.task.heading_error(self)
             parts.append([np.sin(err), np.cos(err)])

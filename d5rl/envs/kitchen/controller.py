@@ -79,8 +79,15 @@ class Controller:
         """Forget the integral (a new target)."""
         self.integral[:] = 0.0
 
-    def action(self, pos: np.ndarray, rot: np.ndarray, grip: float, speed: float = 1.0,
-               integral: bool = True, straight: bool = False) -> np.ndarray:
+    def action(
+        self,
+        pos: np.ndarray,
+        rot: np.ndarray,
+        grip: float,
+        speed: float = 1.0,
+        integral: bool = True,
+        straight: bool = False,
+    ) -> np.ndarray:
         d = self.data
         jac = self._jacobian(d)
         ep = pos - d.site_xpos[self.site]

@@ -15,7 +15,7 @@ the episode's own four subtasks; each task relabels them with :func:`relabel`.
 
 from __future__ import annotations
 
-from typing import Sequence
+from collections.abc import Sequence
 
 import numpy as np
 
@@ -172,9 +172,19 @@ def render_episode(arrays: dict, meta: dict, cameras: Sequence[str] = CAMERAS, s
     return {f"observations/pixels/{c}": v for c, v in frames.items()}
 
 
-def renders(spec, root, manifest, *, episodes: int, workers: int | None = None, progress: bool = True,
-            cameras: Sequence[str] = CAMERAS, size: int = 64, render: bool = True,
-            check: bool = False) -> list:
+def renders(
+    spec,
+    root,
+    manifest,
+    *,
+    episodes: int,
+    workers: int | None = None,
+    progress: bool = True,
+    cameras: Sequence[str] = CAMERAS,
+    size: int = 64,
+    render: bool = True,
+    check: bool = False,
+) -> list:
     """``DatasetSpec.derived``: camera frames of the stored states (cached next to the dataset); for a
     ``-state`` task, its state observations instead.
 
@@ -186,10 +196,28 @@ def renders(spec, root, manifest, *, episodes: int, workers: int | None = None, 
         return []
 
     if spec is not None and spec.observation == "state":
-        return [ensure_render_cache(root, manifest, "d5rl.envs.kitchen.data:state_episode", {}, name="state",
-                                    episodes=episodes, workers=workers, progress=progress)]
+        return [
+            ensure_render_cache(
+                root,
+                manifest,
+                "d5rl.envs.kitchen.data:state_episode",
+                {},
+                name="state",
+                episodes=episodes,
+                workers=workers,
+                progress=progress,
+            )
+        ]
 
-    return [ensure_render_cache(root, manifest, "d5rl.envs.kitchen.data:render_episode",
-                                {"cameras": tuple(cameras), "size": int(size)},
-                                name=f"{'+'.join(cameras)}-{int(size)}x{int(size)}", episodes=episodes,
-                                workers=workers, progress=progress)]
+    return [
+        ensure_render_cache(
+            root,
+            manifest,
+            "d5rl.envs.kitchen.data:render_episode",
+            {"cameras": tuple(cameras), "size": int(size)},
+            name=f"{'+'.join(cameras)}-{int(size)}x{int(size)}",
+            episodes=episodes,
+            workers=workers,
+            progress=progress,
+        )
+    ]

@@ -15,14 +15,13 @@ pauses, and smoothed action noise.  Everything is a pure function of the generat
 from __future__ import annotations
 
 import dataclasses
-from typing import Iterator
+from collections.abc import Iterator
 
 import numpy as np
 
 from d5rl.envs.kitchen.controller import Controller, rot_z
 from d5rl.envs.kitchen.scripts import OPEN, SCRIPTS, Context, Phase, fixed_target
 from d5rl.envs.kitchen.subtasks import SUBTASK_NAMES
-
 
 # --- the policy -----------------------------------------------------------------------------------
 # Between subtasks the arm moves in joint space, straight to an inverse-kinematics solution of the
@@ -61,7 +60,7 @@ class Style:
     via_prob: float  # chance of a detour via a random point before an approach
 
     @staticmethod
-    def sample(rng: np.random.Generator) -> "Style":
+    def sample(rng: np.random.Generator) -> Style:
         """The standard kitchen's demonstrator: speed and noise vary, no detours and no pauses.
 
         Detours via a random point (up to 30% of approaches) and pauses made the data a mixture from
@@ -70,8 +69,9 @@ class Style:
         seeds; kitchen-standard data card).  The randomized kitchen's operators keep both (its
         ``Operator.style``): there they are part of what makes data sub-optimal.
         """
-        return Style(speed=float(rng.uniform(0.9, 1.25)), noise=float(rng.uniform(0.01, 0.05)),
-                     pause_prob=0.0, via_prob=0.0)
+        return Style(
+            speed=float(rng.uniform(0.9, 1.25)), noise=float(rng.uniform(0.01, 0.05)), pause_prob=0.0, via_prob=0.0
+        )
 
 
 class Demonstrator:
@@ -80,8 +80,15 @@ class Demonstrator:
     The env must be reset before the policy is made.  ``rng`` drives every random choice.
     """
 
-    def __init__(self, env, subtasks, rng: np.random.Generator, style: Style | None = None,
-                 transit_first: bool = False, retries: int = 0):
+    def __init__(
+        self,
+        env,
+        subtasks,
+        rng: np.random.Generator,
+        style: Style | None = None,
+        transit_first: bool = False,
+        retries: int = 0,
+    ):
         self.env = env
         # tries again (up to ``retries`` times, after the remaining subtasks) at a subtask whose object
         # is not at its goal after its script, as a teleoperator would; the standard kitchen's data is
@@ -129,8 +136,16 @@ class Demonstrator:
                 wound = name in TRANSIT_IF_WOUND and self._wrist_wound()
                 if far or wound or name in TRANSIT_ALWAYS:
                     q = self._transit_joints(pos + self.ctx.jitter(TRANSIT_JITTER), rot, ph)
-                    yield Phase("transit", lambda c: (c.ee_pos, c.ee_rot), grip=ph.grip, joints=q, tol=0.15,
-                                max_steps=60, speed=TRANSIT_SPEED, freeze=True)
+                    yield Phase(
+                        "transit",
+                        lambda c: (c.ee_pos, c.ee_rot),
+                        grip=ph.grip,
+                        joints=q,
+                        tol=0.15,
+                        max_steps=60,
+                        speed=TRANSIT_SPEED,
+                        freeze=True,
+                    )
             if first and self.rng.random() < self.style.via_prob:
                 via = self.ctx.ee_pos + self.rng.uniform([-0.08, -0.1, -0.02], [0.08, 0.02, 0.1])
                 yield Phase("via", fixed_target(via, self.ctx.ee_rot), grip=ph.grip, tol=0.04, rot_tol=9, max_steps=8)
@@ -161,8 +176,14 @@ class Demonstrator:
     def _next_phase(self) -> None:
         if self._phase is not None:
             pos, rot = self._target()
-            self.log.append((self.current_subtask, self._phase.name, self._steps,
-                             round(float(np.linalg.norm(pos - self.ctx.ee_pos)), 3)))
+            self.log.append(
+                (
+                    self.current_subtask,
+                    self._phase.name,
+                    self._steps,
+                    round(float(np.linalg.norm(pos - self.ctx.ee_pos)), 3),
+                )
+            )
         try:
             self._phase = next(self._queue)
         except StopIteration:
@@ -211,8 +232,14 @@ class Demonstrator:
         pos, rot = self._target()
         # stuck (a wrist joint at its limit)? try once with the hand turned the other way round
         self._errs.append(float(np.linalg.norm(pos - self.ctx.ee_pos)))
-        if (ph.any_roll and ph.name.startswith("pre") and not self._retried and len(self._errs) > 8
-                and self._errs[-1] > 2 * ph.tol and self._errs[-7] - self._errs[-1] < 0.005):
+        if (
+            ph.any_roll
+            and ph.name.startswith("pre")
+            and not self._retried
+            and len(self._errs) > 8
+            and self._errs[-1] > 2 * ph.tol
+            and self._errs[-7] - self._errs[-1] < 0.005
+        ):
             self._flip, self._retried = not self._flip, True
             pos, rot = self._target()
         self._steps += 1
@@ -223,8 +250,7 @@ class Demonstrator:
         elif ph.joints is not None:
             act = self.ctrl.joint_action(ph.joints, ph.grip, ph.speed * self.style.speed)
         else:
-            act = self.ctrl.action(pos, rot, ph.grip, ph.speed * self.style.speed, ph.integral,
-                                   ph.straight)
+            act = self.ctrl.action(pos, rot, ph.grip, ph.speed * self.style.speed, ph.integral, ph.straight)
         self._noise = 0.7 * self._noise + 0.3 * self.rng.normal(0.0, self.style.noise, size=9)
         act[:7] += self._noise[:7]
         return np.clip(act, -1.0, 1.0).astype(np.float32)

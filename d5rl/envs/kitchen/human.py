@@ -55,8 +55,10 @@ class KitchenHumanImport:
 
     version = "kitchen-human-import-1"
     command = f"d5rl import-kitchen-human {DEFAULT_SOURCE}"
-    how = (f"download the human demonstrations with `minari download {DEFAULT_SOURCE}` (pip install minari), "
-           f"then run `{command}` (a D4RL kitchen .hdf5 file works too)")
+    how = (
+        f"download the human demonstrations with `minari download {DEFAULT_SOURCE}` (pip install minari), "
+        f"then run `{command}` (a D4RL kitchen .hdf5 file works too)"
+    )
 
 
 @dataclasses.dataclass
@@ -96,8 +98,10 @@ def locate(source: str | Path) -> tuple[str, Path]:
                 return "minari", candidate
         raise D5RLError(f"{path} holds no Minari dataset (no data/main_data.hdf5)", KitchenHumanImport.how)
     if not path.is_file():
-        raise D5RLError(f"no kitchen dataset at {source!r} (looked for a file, a directory and a Minari id under "
-                        f"{minari_root()})", KitchenHumanImport.how)
+        raise D5RLError(
+            f"no kitchen dataset at {source!r} (looked for a file, a directory and a Minari id under {minari_root()})",
+            KitchenHumanImport.how,
+        )
     try:
         with h5py.File(path, "r") as f:
             keys = list(f.keys())
@@ -107,8 +111,10 @@ def locate(source: str | Path) -> tuple[str, Path]:
         return "d4rl", path
     if any(k.startswith("episode_") for k in keys):
         return "minari", path
-    raise D5RLError(f"{path} has no 'observations' array and no episode_* groups",
-                    "this does not look like a D4RL kitchen file or a Minari kitchen dataset")
+    raise D5RLError(
+        f"{path} has no 'observations' array and no episode_* groups",
+        "this does not look like a D4RL kitchen file or a Minari kitchen dataset",
+    )
 
 
 def _episode_bounds(terminals: np.ndarray, timeouts: np.ndarray, n: int) -> list[tuple[int, int]]:
@@ -138,8 +144,11 @@ def _read(group, key: str, path: Path, where: str, kinds: str, ndim: int, hint: 
         raise D5RLError(f"{where}: {key} has shape {d.shape}, expected {ndim} dimension(s)", hint)
     declared, size = int(np.prod(d.shape, dtype=np.float64)) * d.dtype.itemsize, path.stat().st_size
     if declared > MAX_EXPANSION * size + (1 << 20):
-        raise D5RLError(f"{where}: {key} declares shape {d.shape} ({declared / 2**20:,.0f} MiB) in a file of "
-                        f"{size / 2**20:,.1f} MiB", hint)
+        raise D5RLError(
+            f"{where}: {key} declares shape {d.shape} ({declared / 2**20:,.0f} MiB) in a file of "
+            f"{size / 2**20:,.1f} MiB",
+            hint,
+        )
     return np.asarray(d, dtype)
 
 
@@ -152,9 +161,12 @@ def _finite(path: Path, name: str, arr: np.ndarray, hint: str, offset: int = 0) 
     big = np.abs(a) > MAX_ABS
     if big.any():
         row = int(np.flatnonzero(big.reshape(len(big), -1).any(axis=1))[0])
-        raise D5RLError(f"{path}: {name} has values beyond ±{MAX_ABS:g} (first in row {row + offset}: "
-                        f"{a.reshape(len(a), -1)[row][big.reshape(len(big), -1)[row]][0]:g}), which no kitchen joint "
-                        "or action reaches", hint)
+        raise D5RLError(
+            f"{path}: {name} has values beyond ±{MAX_ABS:g} (first in row {row + offset}: "
+            f"{a.reshape(len(a), -1)[row][big.reshape(len(big), -1)[row]][0]:g}), which no kitchen joint "
+            "or action reaches",
+            hint,
+        )
 
 
 def read_d4rl(path: Path, subtask_idx: dict[str, np.ndarray]) -> list[SourceEpisode]:
@@ -189,12 +201,14 @@ def read_d4rl(path: Path, subtask_idx: dict[str, np.ndarray]) -> list[SourceEpis
             continue  # a single row has no transition
         qpos, goal = obs[a:b, :30], obs[a:b, 30:]
         # An episode of rows a..b-1: observation i, action i; the last row has no successor.
-        claimed = {name: np.linalg.norm(qpos[1:, idx] - goal[1:, idx], axis=-1) < THRESHOLD
-                   for name, idx in subtask_idx.items() if np.any(goal[0, idx] != 0)}
+        claimed = {
+            name: np.linalg.norm(qpos[1:, idx] - goal[1:, idx], axis=-1) < THRESHOLD
+            for name, idx in subtask_idx.items()
+            if np.any(goal[0, idx] != 0)
+        }
         episodes.append(SourceEpisode(qpos, None, actions[a : b - 1], claimed, {"source_rows": [int(a), int(b)]}))
     if not episodes:
-        raise D5RLError(f"{path}: no episode has 2 or more rows (every row ends one), so there is no transition",
-                        hint)
+        raise D5RLError(f"{path}: no episode has 2 or more rows (every row ends one), so there is no transition", hint)
     return episodes
 
 
@@ -220,8 +234,11 @@ def read_minari(path: Path, subtask_idx: dict[str, np.ndarray]) -> list[SourceEp
             if obs.ndim != 2 or obs.shape[1] != 59:
                 raise D5RLError(f"{where}: observations/observation has shape {obs.shape}, expected (T+1, 59)", hint)
             if actions.shape != (len(obs) - 1, 9):
-                raise D5RLError(f"{where}: actions have shape {actions.shape}, expected ({len(obs) - 1}, 9) "
-                                "(one fewer than observations)", hint)
+                raise D5RLError(
+                    f"{where}: actions have shape {actions.shape}, expected ({len(obs) - 1}, 9) "
+                    "(one fewer than observations)",
+                    hint,
+                )
             _finite(where, "observations/observation", obs, hint)
             _finite(where, "actions", actions, hint)
             qpos, qvel = obs[:, MINARI_QPOS], obs[:, MINARI_QVEL]
@@ -232,8 +249,11 @@ def read_minari(path: Path, subtask_idx: dict[str, np.ndarray]) -> list[SourceEp
                 achieved = _read(g, f"observations/achieved_goal/{task}", path, where, "fiu", 2, hint, np.float64)
                 desired = _read(g, f"observations/desired_goal/{task}", path, where, "fiu", 2, hint, np.float64)
                 if achieved.shape != (len(obs), len(subtask_idx[task])):
-                    raise D5RLError(f"{where}: achieved_goal/{task} has shape {achieved.shape}, expected "
-                                    f"({len(obs)}, {len(subtask_idx[task])})", hint)
+                    raise D5RLError(
+                        f"{where}: achieved_goal/{task} has shape {achieved.shape}, expected "
+                        f"({len(obs)}, {len(subtask_idx[task])})",
+                        hint,
+                    )
                 qpos[:, subtask_idx[task]] = achieved  # noise-free, unlike observation
                 claimed[task] = np.linalg.norm(achieved[1:] - desired[1:], axis=-1) < THRESHOLD
             if len(actions) >= 1:
@@ -288,8 +308,9 @@ def replay_check(index: int, claimed: dict[str, np.ndarray], ours: np.ndarray) -
 ACTION_CHECK_STRIDE = 10  # every 10th transition: ~1/10 of an env step per transition on import
 
 
-def action_errors(env, states: np.ndarray, qpos: np.ndarray, actions: np.ndarray,
-                  stride: int = ACTION_CHECK_STRIDE) -> np.ndarray:
+def action_errors(
+    env, states: np.ndarray, qpos: np.ndarray, actions: np.ndarray, stride: int = ACTION_CHECK_STRIDE
+) -> np.ndarray:
     """How far one step of our env, from a stored state with the stored action, lands from the next stored
     arm position (rad, the largest of the 7 arm joints), for every ``stride``-th transition: whether the
     file's actions move our robot as they moved the demonstrator's (what a policy learnt from them needs)."""
@@ -305,14 +326,23 @@ def completion_order(completed: np.ndarray) -> list[str]:
     """Subtasks in the order they first reach their goal in an episode (``infos/completed`` rows)."""
     from d5rl.envs.kitchen.subtasks import SUBTASK_NAMES
 
-    first = {SUBTASK_NAMES[j]: int(np.argmax(completed[:, j]))
-             for j in range(completed.shape[1]) if completed[:, j].any()}
+    first = {
+        SUBTASK_NAMES[j]: int(np.argmax(completed[:, j])) for j in range(completed.shape[1]) if completed[:, j].any()
+    }
     return sorted(first, key=lambda t: (first[t], SUBTASK_NAMES.index(t)))
 
 
 # --- writing the d5rl dataset ----------------------------------------------------------------------
-def import_human(source: str | Path, *, render: bool = True, cameras=("overview", "wrist"), size: int = 64,
-                 workers: int | None = None, progress: bool = True, out=print) -> Path:
+def import_human(
+    source: str | Path,
+    *,
+    render: bool = True,
+    cameras=("overview", "wrist"),
+    size: int = 64,
+    workers: int | None = None,
+    progress: bool = True,
+    out=print,
+) -> Path:
     """Convert ``source`` into the ``kitchen-standard-human`` dataset; returns its directory."""
     from d5rl.datasets import format as fmt
     from d5rl.datasets import generation, lock
@@ -374,43 +404,87 @@ def import_human(source: str | Path, *, render: bool = True, cameras=("overview"
                 for k, v in arrays.items():
                     parts.setdefault(k, []).append(v)
                 lengths.append(t)
-                metas.append({**ep.meta, "subtasks": order, "solved": order, "num_solved": len(order),
-                              "action_error_median": round(float(np.median(err)), 5)})
+                metas.append(
+                    {
+                        **ep.meta,
+                        "subtasks": order,
+                        "solved": order,
+                        "num_solved": len(order),
+                        "action_error_median": round(float(np.median(err)), 5),
+                    }
+                )
                 bar.update(1)
             writer = fmt.ShardWriter(root / "shards", s)
             for k, v in parts.items():
                 writer.write(k, np.concatenate(v))
             aligns = {k: "step" if k in ("states", "observations/proprio") else "transition" for k in parts}
-            records.append(writer.commit({**ident, "episodes": [first, first + len(lengths)],
-                                          "episode_lengths": lengths, "episode_meta": metas}, aligns))
+            records.append(
+                writer.commit(
+                    {
+                        **ident,
+                        "episodes": [first, first + len(lengths)],
+                        "episode_lengths": lengths,
+                        "episode_meta": metas,
+                    },
+                    aligns,
+                )
+            )
         bar.close()
-        source_info = {"layout": kind, "id": _source_id(kind, path), "file": path.name,
-                       "sha256": fmt.sha256_file(path), "velocities": kind == "minari"}
+        source_info = {
+            "layout": kind,
+            "id": _source_id(kind, path),
+            "file": path.name,
+            "sha256": fmt.sha256_file(path),
+            "velocities": kind == "minari",
+        }
         err = np.concatenate(errors)
         moves = np.concatenate([np.abs(np.diff(e.qpos[:, :7], axis=0)).max(axis=1) for e in episodes])
-        actions_check = {"stride": ACTION_CHECK_STRIDE, "transitions": len(err),
-                         "median_rad": float(np.median(err)), "p90_rad": float(np.quantile(err, 0.9)),
-                         "median_step_rad": float(np.median(moves))}
-        check = {"episodes_checked": len(episodes), "episodes_mismatched": len(mismatches),
-                 "mismatches": mismatches, "actions": actions_check}
-        generation.write_manifest(root, dspec, ident, records, len(episodes),
-                                  extra={"source": source_info, "replay_check": check})
-    out(f"imported {len(episodes)} episodes ({sum(len(e.actions) for e in episodes)} transitions) from "
-        f"{source_info['id']} ({kind} layout) into {root}")
-    out(f"replay check: {len(episodes) - len(mismatches)} of {len(episodes)} episodes agree with the file "
-        "on every step's subtasks")
+        actions_check = {
+            "stride": ACTION_CHECK_STRIDE,
+            "transitions": len(err),
+            "median_rad": float(np.median(err)),
+            "p90_rad": float(np.quantile(err, 0.9)),
+            "median_step_rad": float(np.median(moves)),
+        }
+        check = {
+            "episodes_checked": len(episodes),
+            "episodes_mismatched": len(mismatches),
+            "mismatches": mismatches,
+            "actions": actions_check,
+        }
+        generation.write_manifest(
+            root, dspec, ident, records, len(episodes), extra={"source": source_info, "replay_check": check}
+        )
+    out(
+        f"imported {len(episodes)} episodes ({sum(len(e.actions) for e in episodes)} transitions) from "
+        f"{source_info['id']} ({kind} layout) into {root}"
+    )
+    out(
+        f"replay check: {len(episodes) - len(mismatches)} of {len(episodes)} episodes agree with the file "
+        "on every step's subtasks"
+    )
     for m in mismatches[:20]:
-        out(f"  episode {m['episode']}: file says done {m['file_done']}, our scene {m['scene_done']}; "
-            f"steps that differ: {m['steps_differ']}")
+        out(
+            f"  episode {m['episode']}: file says done {m['file_done']}, our scene {m['scene_done']}; "
+            f"steps that differ: {m['steps_differ']}"
+        )
     if len(mismatches) > 20:
         out(f"  ... {len(mismatches) - 20} more in {root / fmt.MANIFEST} (replay_check)")
-    out(f"action check: one step of our env from a stored state with the stored action ends "
+    out(
+        f"action check: one step of our env from a stored state with the stored action ends "
         f"{actions_check['median_rad']:.4f} rad (median; 90%: {actions_check['p90_rad']:.4f}) from the next stored "
         f"arm position (the arm moves {actions_check['median_step_rad']:.4f} rad a step, median), "
-        f"over every {ACTION_CHECK_STRIDE}th transition")
+        f"over every {ACTION_CHECK_STRIDE}th transition"
+    )
     if render:  # the camera tasks' frames, from the states (a regular derived cache)
-        load_dataset("kitchen-standard-mixed-human-v0", cameras=tuple(cameras), size=size, workers=workers,
-                     progress=progress, in_memory=False)
+        load_dataset(
+            "kitchen-standard-mixed-human-v0",
+            cameras=tuple(cameras),
+            size=size,
+            workers=workers,
+            progress=progress,
+            in_memory=False,
+        )
     return root
 
 
@@ -419,9 +493,13 @@ def add_import_kitchen_human_parser(subparsers) -> None:
         "import-kitchen-human",
         help="import the paper's human kitchen demonstrations (Minari D4RL/kitchen/*-v2 or a D4RL .hdf5 file)",
         description="Replay the relay-policy-learning human demonstrations in our kitchen and write them as the "
-                    "dataset of the kitchen-standard-*-human-v0 tasks. " + KitchenHumanImport.how + ".")
-    q.add_argument("source", help=f"Minari dataset id (e.g. {DEFAULT_SOURCE}, under $MINARI_DATASETS_PATH or "
-                                  "~/.minari/datasets), its directory, or a D4RL kitchen_*-v0.hdf5 file")
+        "dataset of the kitchen-standard-*-human-v0 tasks. " + KitchenHumanImport.how + ".",
+    )
+    q.add_argument(
+        "source",
+        help=f"Minari dataset id (e.g. {DEFAULT_SOURCE}, under $MINARI_DATASETS_PATH or "
+        "~/.minari/datasets), its directory, or a D4RL kitchen_*-v0.hdf5 file",
+    )
     q.add_argument("--size", type=int, default=64, help="image size of the rendered cache (64 or 128)")
     q.add_argument("--cameras", default="overview,wrist", help="comma-separated cameras")
     q.add_argument("--no-render", action="store_true", help="skip the camera frames (state tasks need none)")
@@ -430,6 +508,11 @@ def add_import_kitchen_human_parser(subparsers) -> None:
 
 
 def _cmd_import(args: argparse.Namespace) -> int:
-    import_human(args.source, render=not args.no_render, cameras=tuple(args.cameras.split(",")), size=args.size,
-                 workers=args.workers)
+    import_human(
+        args.source,
+        render=not args.no_render,
+        cameras=tuple(args.cameras.split(",")),
+        size=args.size,
+        workers=args.workers,
+    )
     return 0

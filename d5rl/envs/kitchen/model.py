@@ -54,6 +54,7 @@ INIT_QPOS = np.array(
     ]
 )  # fmt: skip
 
+
 def asset_dir() -> Path:
     """``kitchen_franka`` of the ``gymnasium-robotics`` wheel (see :mod:`d5rl.assets`)."""
     path = asset_path("gymnasium-robotics", "envs", "assets", "kitchen_franka")

@@ -22,7 +22,7 @@ HUMAN_DATASET = DatasetSpec(
     num_episodes=0,  # as many as the imported file holds
     episodes_per_shard=16,
     description="the relay-policy-learning human demonstrations the paper used, imported with "
-                "`d5rl import-kitchen-human` (Minari D4RL/kitchen/*-v2 or a D4RL kitchen file)",
+    "`d5rl import-kitchen-human` (Minari D4RL/kitchen/*-v2 or a D4RL kitchen file)",
     derived="d5rl.envs.kitchen.data:renders",
 )
 SCORE = (

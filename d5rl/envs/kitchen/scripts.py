@@ -5,7 +5,7 @@ along a door's arc), a gripper command and a condition that ends the phase."""
 from __future__ import annotations
 
 import dataclasses
-from typing import Callable, Iterator
+from collections.abc import Callable, Iterator
 
 import numpy as np
 
@@ -25,11 +25,11 @@ class Phase:
     """One motion: go to ``target(ctx) -> (pos, rot)`` with the gripper at ``grip``."""
 
     name: str
-    target: Callable[["Context"], tuple[np.ndarray, np.ndarray]]
+    target: Callable[[Context], tuple[np.ndarray, np.ndarray]]
     grip: float = OPEN
     tol: float = 0.015  # position tolerance (m) when no ``done`` is given
     rot_tol: float = 0.12  # orientation tolerance (rad)
-    done: Callable[["Context"], bool] | None = None
+    done: Callable[[Context], bool] | None = None
     max_steps: int = 40
     speed: float = 1.0  # multiplies the controller's speed limits
     freeze: bool = False  # evaluate ``target`` once when the phase starts (relative moves)
@@ -61,7 +61,7 @@ class KettleGrasp:
     lift: tuple[float, float] = (0.07, 0.09)  # m, uniform lift height
 
 
-def grasp_plan(ctx: "Context", subtask: str, default):
+def grasp_plan(ctx: Context, subtask: str, default):
     """The env's grasp plan for ``subtask`` (the randomized kitchen's object models), else ``default``."""
     return getattr(ctx.env, "grasp_plans", {}).get(subtask, default)
 
@@ -122,9 +122,19 @@ def fixed_target(pos: np.ndarray, rot: np.ndarray):
     return lambda ctx: (pos, rot)
 
 
-def _grasp_and_swing(ctx: Context, hinge_body: str, handle_site: str, joint: str, goal: float, rot: np.ndarray,
-                     lead: float, depth: float, wrist_follow: float = 0.5, dz: tuple[float, float] = (-0.04, 0.04),
-                     enough: float | None = None) -> Iterator[Phase]:
+def _grasp_and_swing(
+    ctx: Context,
+    hinge_body: str,
+    handle_site: str,
+    joint: str,
+    goal: float,
+    rot: np.ndarray,
+    lead: float,
+    depth: float,
+    wrist_follow: float = 0.5,
+    dz: tuple[float, float] = (-0.04, 0.04),
+    enough: float | None = None,
+) -> Iterator[Phase]:
     """Grasp a handle on a hinged door and swing it along its arc to ``goal`` (joint value)."""
     handle = ctx.site(handle_site) + np.array([0, 0, ctx.rng.uniform(*dz)])
     n = _approach_dir(rot)
@@ -158,20 +168,38 @@ def _grasp_and_swing(ctx: Context, hinge_body: str, handle_site: str, joint: str
 
     yield Phase("swing", swing, grip=CLOSE, done=swung, max_steps=50)
     yield _hold("release", OPEN, 3)
-    yield Phase("retreat", lambda c: (c.ee_pos - 0.12 * c.ee_rot[:, 2], c.ee_rot), tol=0.04, rot_tol=9, max_steps=15, freeze=True)
+    yield Phase(
+        "retreat",
+        lambda c: (c.ee_pos - 0.12 * c.ee_rot[:, 2], c.ee_rot),
+        tol=0.04,
+        rot_tol=9,
+        max_steps=15,
+        freeze=True,
+    )
 
 
 def microwave(ctx: Context) -> Iterator[Phase]:
     plan = grasp_plan(ctx, "microwave", MicrowaveGrasp())
     yaw = np.arctan2(-ctx.body_mat("microdoorroot")[0, 1], ctx.body_mat("microdoorroot")[1, 1])
     rot = rot_z(yaw) @ R_FORWARD
-    yield from _grasp_and_swing(ctx, "microdoorroot", "microhandle_site", "microwave", -0.72, rot, 0.4, plan.depth,
-                                dz=plan.dz, enough=-0.62)
+    yield from _grasp_and_swing(
+        ctx, "microdoorroot", "microhandle_site", "microwave", -0.72, rot, 0.4, plan.depth, dz=plan.dz, enough=-0.62
+    )
 
 
 def hinge_cabinet(ctx: Context) -> Iterator[Phase]:
-    yield from _grasp_and_swing(ctx, "hingerightdoor", "hinge_site2", "right_hinge_cabinet", 1.6, R_FORWARD, 0.35,
-                                0.015, dz=(-0.10, -0.03), enough=1.45)
+    yield from _grasp_and_swing(
+        ctx,
+        "hingerightdoor",
+        "hinge_site2",
+        "right_hinge_cabinet",
+        1.6,
+        R_FORWARD,
+        0.35,
+        0.015,
+        dz=(-0.10, -0.03),
+        enough=1.45,
+    )
 
 
 def slide_cabinet(ctx: Context) -> Iterator[Phase]:
@@ -187,8 +215,9 @@ def slide_cabinet(ctx: Context) -> Iterator[Phase]:
         q = c.joint("slide_cabinet")
         return handle + 0.015 * n + np.array([min(q + 0.12, target), 0, 0]), rot
 
-    yield Phase("slide", pull, grip=CLOSE, done=lambda c: c.joint("slide_cabinet") >= target - 0.03, max_steps=50,
-                speed=0.7)
+    yield Phase(
+        "slide", pull, grip=CLOSE, done=lambda c: c.joint("slide_cabinet") >= target - 0.03, max_steps=50, speed=0.7
+    )
     yield _hold("release", OPEN, 3)
     yield Phase("retreat", lambda c: (c.ee_pos - 0.12 * n, rot), tol=0.04, rot_tol=9, max_steps=15, freeze=True)
 
@@ -200,8 +229,13 @@ def _knob(ctx: Context, knob_body: str, joint: str, goal: float) -> Iterator[Pha
     rot = R_FORWARD  # fingers across the ridge
     n = _approach_dir(rot)
     # the wrist turns the knob by ~1.2 rad: approach with the hand roll that leaves the last joint room
-    yield Phase("pre-grasp", fixed_target(center - (0.10 + ctx.rng.uniform(0, 0.04)) * n, rot), tol=0.03, rot_tol=0.25,
-                roll_room=1.3)
+    yield Phase(
+        "pre-grasp",
+        fixed_target(center - (0.10 + ctx.rng.uniform(0, 0.04)) * n, rot),
+        tol=0.03,
+        rot_tol=0.25,
+        roll_room=1.3,
+    )
     yield Phase("reach", fixed_target(center, rot), tol=0.02, max_steps=20, speed=0.8, roll_room=1.3)
     yield Phase("grasp", fixed_target(center, rot), grip=CLOSE, done=_never, max_steps=4)
 
@@ -243,14 +277,45 @@ def light_switch(ctx: Context) -> Iterator[Phase]:
     rot = R_FORWARD  # (the half-turned hand would need the 5th joint past its limit to push)
     # push a little below the lever's axis so the fingers do not ride over it
     side = np.array([0.05 + ctx.rng.uniform(0, 0.01), 0.0, ctx.rng.uniform(-0.012, -0.004)])
-    yield Phase("pre-push", fixed_target(tip + side + np.array([0, -0.10, 0]), rot), grip=CLOSE, tol=0.03, rot_tol=0.25,
-                any_roll=False)
-    yield Phase("reach", fixed_target(tip + side + np.array([0, -0.01, 0]), rot), grip=CLOSE, tol=0.012, rot_tol=0.06,
-                max_steps=30, speed=0.8, any_roll=False, integral=False, straight=True)
-    yield Phase("push", fixed_target(tip + np.array([-0.12, -0.01, side[2]]), rot), grip=CLOSE,
-                done=lambda c: c.joint("light_switch") <= -0.6, max_steps=40, speed=0.5, any_roll=False, integral=False)
-    yield Phase("retreat", lambda c: (c.ee_pos + np.array([0, -0.12, 0]), rot), grip=CLOSE, tol=0.04, rot_tol=9,
-                max_steps=15, freeze=True)
+    yield Phase(
+        "pre-push",
+        fixed_target(tip + side + np.array([0, -0.10, 0]), rot),
+        grip=CLOSE,
+        tol=0.03,
+        rot_tol=0.25,
+        any_roll=False,
+    )
+    yield Phase(
+        "reach",
+        fixed_target(tip + side + np.array([0, -0.01, 0]), rot),
+        grip=CLOSE,
+        tol=0.012,
+        rot_tol=0.06,
+        max_steps=30,
+        speed=0.8,
+        any_roll=False,
+        integral=False,
+        straight=True,
+    )
+    yield Phase(
+        "push",
+        fixed_target(tip + np.array([-0.12, -0.01, side[2]]), rot),
+        grip=CLOSE,
+        done=lambda c: c.joint("light_switch") <= -0.6,
+        max_steps=40,
+        speed=0.5,
+        any_roll=False,
+        integral=False,
+    )
+    yield Phase(
+        "retreat",
+        lambda c: (c.ee_pos + np.array([0, -0.12, 0]), rot),
+        grip=CLOSE,
+        tol=0.04,
+        rot_tol=9,
+        max_steps=15,
+        freeze=True,
+    )
 
 
 KETTLE_GOAL_HANDLE = np.array([-0.234, 0.748, 1.879])  # handle site with the kettle at its goal pose
@@ -288,19 +353,27 @@ def kettle(ctx: Context) -> Iterator[Phase]:
     goal_handle = KETTLE_GOAL_HANDLE + (ctx.kettle_handle_offset() - KETTLE_STOCK_HANDLE)
     yield Phase("pre-grasp", fixed_target(grasp - ctx.rng.uniform(0.10, 0.14) * n, rot), tol=0.03, rot_tol=0.2)
     # follow the handle live: the arm may have nudged the kettle on its way
-    yield Phase("reach", lambda c: (c.site("kettle_site") + offset, rot), tol=0.01, max_steps=25, speed=0.8,
-                straight=True)
+    yield Phase(
+        "reach", lambda c: (c.site("kettle_site") + offset, rot), tol=0.01, max_steps=25, speed=0.8, straight=True
+    )
     yield _hold("grasp", CLOSE, 5)
     lift = ctx.rng.uniform(*plan.lift)
     n_lift = int(ctx.rng.integers(5, 8))
-    yield Phase("lift", _glide(None, lift * up, rot, n_lift, relative=True), grip=CLOSE, done=_never,
-                max_steps=n_lift + 2)
+    yield Phase(
+        "lift", _glide(None, lift * up, rot, n_lift, relative=True), grip=CLOSE, done=_never, max_steps=n_lift + 2
+    )
     goal = goal_handle + np.array([ctx.rng.uniform(-0.01, 0.01), ctx.rng.uniform(-0.005, 0.015), 0.0])
     n_carry = int(ctx.rng.integers(18, 26))
-    yield Phase("carry", _glide(None, goal + lift * up, rot, n_carry), grip=CLOSE, tol=0.02, rot_tol=0.3,
-                min_steps=n_carry, max_steps=n_carry + 15)
-    yield Phase("lower", _glide(None, goal + 0.005 * up, rot, n_lift), grip=CLOSE, done=_never,
-                max_steps=n_lift + 2)
+    yield Phase(
+        "carry",
+        _glide(None, goal + lift * up, rot, n_carry),
+        grip=CLOSE,
+        tol=0.02,
+        rot_tol=0.3,
+        min_steps=n_carry,
+        max_steps=n_carry + 15,
+    )
+    yield Phase("lower", _glide(None, goal + 0.005 * up, rot, n_lift), grip=CLOSE, done=_never, max_steps=n_lift + 2)
     yield _hold("release", OPEN, 6)  # the fingers need ~0.4 s to clear the thick handle
 
     def back_off(c: Context):  # straight back until the fingers are clear of the handle

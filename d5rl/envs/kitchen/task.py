@@ -46,7 +46,8 @@ Version history
 
 from __future__ import annotations
 
-from typing import Any, Sequence
+from collections.abc import Sequence
+from typing import Any
 
 import mujoco
 import numpy as np
@@ -97,8 +98,15 @@ class KitchenEnv(MujocoEnv):
             raise D5RLError(f"obs_mode must be one of {OBS_MODES}, got {obs_mode!r}", "use 'pixels' or 'state'")
         if model is None:
             model = km.build_model(scene_options or km.SceneOptions())
-        super().__init__(model, FRAME_SKIP, render_mode=render_mode, render_size=render_size, render_camera="overview",
-                         width=width, height=height)
+        super().__init__(
+            model,
+            FRAME_SKIP,
+            render_mode=render_mode,
+            render_size=render_size,
+            render_camera="overview",
+            width=width,
+            height=height,
+        )
         self.tasks = tuple(tasks)
         self.obs_mode = obs_mode
         self.image_size = int(image_size)
@@ -115,9 +123,7 @@ class KitchenEnv(MujocoEnv):
         proprio = spaces.Box(-np.inf, np.inf, shape=(km.NUM_ROBOT_QPOS,), dtype=np.float32)
         if obs_mode == "pixels":
             img = spaces.Box(0, 255, shape=(self.image_size, self.image_size, 3), dtype=np.uint8)
-            self.observation_space = spaces.Dict(
-                {**{f"pixels/{c}": img for c in self.cameras}, "proprio": proprio}
-            )
+            self.observation_space = spaces.Dict({**{f"pixels/{c}": img for c in self.cameras}, "proprio": proprio})
         else:
             self.observation_space = spaces.Box(-np.inf, np.inf, shape=(JOINTS,), dtype=np.float32)
 

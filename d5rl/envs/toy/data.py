@@ -28,8 +28,10 @@ def toy_episode(rng: np.random.Generator, expert_prob: float, noise: float, pixe
         acts.append(a)
         rews.append(r)
     arrays = {
-        "actions": np.asarray(acts, np.float32), "rewards": np.asarray(rews, np.float32),
-        "terminals": np.zeros(HORIZON, bool), "timeouts": np.eye(1, HORIZON, HORIZON - 1, dtype=bool)[0],
+        "actions": np.asarray(acts, np.float32),
+        "rewards": np.asarray(rews, np.float32),
+        "terminals": np.zeros(HORIZON, bool),
+        "timeouts": np.eye(1, HORIZON, HORIZON - 1, dtype=bool)[0],
     }
     if pixels:
         for k in obs_list[0]:
@@ -39,8 +41,9 @@ def toy_episode(rng: np.random.Generator, expert_prob: float, noise: float, pixe
     return Episode(arrays, {"expert_prob": expert_prob})
 
 
-def toy_dataset(num_episodes: int = 200, seed: int = 0, expert_prob: float = 0.3, noise: float = 0.3,
-                pixels: bool = False):
+def toy_dataset(
+    num_episodes: int = 200, seed: int = 0, expert_prob: float = 0.3, noise: float = 0.3, pixels: bool = False
+):
     """A :class:`~d5rl.datasets.dataset.Dataset` of ``num_episodes`` suboptimal episodes."""
     from d5rl.datasets.dataset import Dataset
 

@@ -23,9 +23,14 @@ CAMERAS = ("front", "side")
 class ToyReachEnv(gym.Env):
     metadata = {"render_modes": ["rgb_array"], "render_fps": 10}
 
-    def __init__(self, pixels: bool = False, render_mode: str | None = None,
-                 render_size: tuple[int, int] = (8 * IMG, 8 * IMG), width: int | None = None,
-                 height: int | None = None):
+    def __init__(
+        self,
+        pixels: bool = False,
+        render_mode: str | None = None,
+        render_size: tuple[int, int] = (8 * IMG, 8 * IMG),
+        width: int | None = None,
+        height: int | None = None,
+    ):
         from d5rl.envs.base import frame_size
 
         if render_mode is not None and render_mode not in self.metadata["render_modes"]:
@@ -36,10 +41,12 @@ class ToyReachEnv(gym.Env):
         self.action_space = gym.spaces.Box(-1.0, 1.0, (2,), np.float32)
         state_space = gym.spaces.Box(-2.0, 2.0, (4,), np.float32)
         if pixels:
-            self.observation_space = gym.spaces.Dict({
-                **{f"pixels/{c}": gym.spaces.Box(0, 255, (IMG, IMG, 3), np.uint8) for c in CAMERAS},
-                "proprio": gym.spaces.Box(-1.0, 1.0, (2,), np.float32),
-            })
+            self.observation_space = gym.spaces.Dict(
+                {
+                    **{f"pixels/{c}": gym.spaces.Box(0, 255, (IMG, IMG, 3), np.uint8) for c in CAMERAS},
+                    "proprio": gym.spaces.Box(-1.0, 1.0, (2,), np.float32),
+                }
+            )
         else:
             self.observation_space = state_space
         self.pos = np.zeros(2, np.float32)
@@ -47,8 +54,10 @@ class ToyReachEnv(gym.Env):
 
     def _image(self, flip: bool) -> np.ndarray:
         img = np.zeros((IMG, IMG, 3), np.uint8)
+
         def cell(p):
             return np.clip(((p + 1) / 2 * (IMG - 1)).round().astype(int), 0, IMG - 1)
+
         gx, gy = cell(GOAL)
         px, py = cell(self.pos)
         if flip:
@@ -60,8 +69,7 @@ class ToyReachEnv(gym.Env):
 
     def _obs(self):
         if self.pixels:
-            return {"pixels/front": self._image(False), "pixels/side": self._image(True),
-                    "proprio": self.pos.copy()}
+            return {"pixels/front": self._image(False), "pixels/side": self._image(True), "proprio": self.pos.copy()}
         return np.concatenate([self.pos, GOAL - self.pos]).astype(np.float32)
 
     def reset(self, *, seed=None, options=None):

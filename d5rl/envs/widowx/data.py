@@ -40,9 +40,9 @@ import mujoco
 import numpy as np
 
 from d5rl.datasets.episode import Episode
+from d5rl.envs.widowx import domain as wdom
 from d5rl.envs.widowx import model as wm
 from d5rl.envs.widowx import scene as wscene
-from d5rl.envs.widowx import domain as wdom
 from d5rl.envs.widowx import scripted
 from d5rl.envs.widowx.registration import MAX_EPISODE_STEPS
 from d5rl.envs.widowx.task import LIFTED_Z, WidowXSortingEnv
@@ -58,13 +58,23 @@ class WidowXScriptedGenerator:
     # 4: the room's floor, walls and table legs collide (an object off the table lands on the floor).
     version = "wx-scripted-4"
 
-    def __init__(self, task_id: str = "", mode: str = "sorting", p_wrong: float = 0.3, p_one: float = 0.0,
-                 p_miss: float = 0.0, episode_steps: int | None = None, noise: float = 0.15):
+    def __init__(
+        self,
+        task_id: str = "",
+        mode: str = "sorting",
+        p_wrong: float = 0.3,
+        p_one: float = 0.0,
+        p_miss: float = 0.0,
+        episode_steps: int | None = None,
+        noise: float = 0.15,
+    ):
         if mode not in ("sorting", "pickplace"):
             raise ValueError(f"mode must be 'sorting' or 'pickplace', got {mode!r}")
         if not (0 <= p_one and 0 <= p_miss and p_one + p_miss <= 1) or (mode == "pickplace" and p_one + p_miss):
-            raise ValueError(f"p_one={p_one}, p_miss={p_miss}: need p_one, p_miss >= 0 with p_one + p_miss <= 1, "
-                             "and both 0 for mode='pickplace'")
+            raise ValueError(
+                f"p_one={p_one}, p_miss={p_miss}: need p_one, p_miss >= 0 with p_one + p_miss <= 1, "
+                "and both 0 for mode='pickplace'"
+            )
         self.task_id = task_id
         self.mode = mode
         self.p_wrong = float(p_wrong)
@@ -204,8 +214,18 @@ def state_episode(arrays: dict[str, np.ndarray], meta: dict) -> dict[str, np.nda
     return {"observations": np.asarray(out, np.float32)}
 
 
-def renders(spec, root, manifest, *, episodes: int, workers: int | None = None, progress: bool = True,
-            size: int = 128, render: bool = True, check: bool = False) -> list:
+def renders(
+    spec,
+    root,
+    manifest,
+    *,
+    episodes: int,
+    workers: int | None = None,
+    progress: bool = True,
+    size: int = 128,
+    render: bool = True,
+    check: bool = False,
+) -> list:
     """``DatasetSpec.derived``: the ``observations/pixels/side`` frames, cached next to the dataset; for a
     ``-state`` task, its state observations instead.
 
@@ -219,9 +239,28 @@ def renders(spec, root, manifest, *, episodes: int, workers: int | None = None, 
         return []
 
     if spec is not None and spec.observation == "state":
-        return [ensure_render_cache(root, manifest, "d5rl.envs.widowx.data:state_episode", {}, name="state",
-                                    episodes=episodes, workers=workers, progress=progress)]
+        return [
+            ensure_render_cache(
+                root,
+                manifest,
+                "d5rl.envs.widowx.data:state_episode",
+                {},
+                name="state",
+                episodes=episodes,
+                workers=workers,
+                progress=progress,
+            )
+        ]
 
-    return [ensure_render_cache(root, manifest, "d5rl.envs.widowx.data:render_episode", {"size": int(size)},
-                                name=f"side-{int(size)}x{int(size)}", episodes=episodes, workers=workers,
-                                progress=progress)]
+    return [
+        ensure_render_cache(
+            root,
+            manifest,
+            "d5rl.envs.widowx.data:render_episode",
+            {"size": int(size)},
+            name=f"side-{int(size)}x{int(size)}",
+            episodes=episodes,
+            workers=workers,
+            progress=progress,
+        )
+    ]

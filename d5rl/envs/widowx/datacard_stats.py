@@ -62,10 +62,13 @@ def stats(metas: list[dict]) -> dict:
     out["botched grasps (on purpose)"] = len(attempts) - len(real)
     out["wrong bin chosen, of attempted objects"] = _mean(m["wrong_bin"][i] for m, i in attempts)
     out["ended in the wrong bin, of attempted objects"] = _mean(
-        m["final_bins"][i] not in (None, _category(m["objects"][i])) for m, i in attempts)
+        m["final_bins"][i] not in (None, _category(m["objects"][i])) for m, i in attempts
+    )
     plans = Counter(m.get("plan", "both") for m in metas)
-    out["plans"] = {p: (c / n, _mean(m["num_sorted"] == 2 for m in metas if m.get("plan", "both") == p))
-                    for p, c in sorted(plans.items())}
+    out["plans"] = {
+        p: (c / n, _mean(m["num_sorted"] == 2 for m in metas if m.get("plan", "both") == p))
+        for p, c in sorted(plans.items())
+    }
     done = [m["policy_done_step"] for m in metas if m["policy_done_step"] is not None]
     out["policy finished within the episode"] = len(done) / n
     if done:
@@ -91,18 +94,23 @@ def _category(name: str) -> str:
 
 
 def to_markdown(task_id: str, s: dict) -> str:
-    lines = [f"### {task_id} ({s['episodes']} episodes)", "",
-             f"- full task solved (both objects in their correct bins at the end): {s['full task solved']:.1%}",
-             f"- shoe in the shoe bin at the end: {s['shoe in the shoe bin at the end']:.1%} of episodes; "
-             f"toy in the toy bin: {s['toy in the toy bin at the end']:.1%}",
-             f"- objects in their correct bin at the end: 0: {s['final objects sorted'][0]:.1%}, "
-             f"1: {s['final objects sorted'][1]:.1%}, 2: {s['final objects sorted'][2]:.1%}; "
-             f"mean normalized score {s['mean final score']:.3f}"]
+    lines = [
+        f"### {task_id} ({s['episodes']} episodes)",
+        "",
+        f"- full task solved (both objects in their correct bins at the end): {s['full task solved']:.1%}",
+        f"- shoe in the shoe bin at the end: {s['shoe in the shoe bin at the end']:.1%} of episodes; "
+        f"toy in the toy bin: {s['toy in the toy bin at the end']:.1%}",
+        f"- objects in their correct bin at the end: 0: {s['final objects sorted'][0]:.1%}, "
+        f"1: {s['final objects sorted'][1]:.1%}, 2: {s['final objects sorted'][2]:.1%}; "
+        f"mean normalized score {s['mean final score']:.3f}",
+    ]
     g, ng = s["grasp failures (not lifted), of real grasps"]
-    lines += [f"- objects attempted: {s['objects attempted']}; grasp failures: {g:.1%} of {ng} real grasps; "
-              f"botched on purpose: {s['botched grasps (on purpose)']}",
-              f"- wrong bin chosen: {s['wrong bin chosen, of attempted objects']:.1%} of attempted objects; "
-              f"ended in the wrong bin: {s['ended in the wrong bin, of attempted objects']:.1%}"]
+    lines += [
+        f"- objects attempted: {s['objects attempted']}; grasp failures: {g:.1%} of {ng} real grasps; "
+        f"botched on purpose: {s['botched grasps (on purpose)']}",
+        f"- wrong bin chosen: {s['wrong bin chosen, of attempted objects']:.1%} of attempted objects; "
+        f"ended in the wrong bin: {s['ended in the wrong bin, of attempted objects']:.1%}",
+    ]
     if len(s["plans"]) > 1 or "pickplace" not in s["plans"]:
         plans = ", ".join(f"{p} {f:.1%} (full task solved in {ok:.1%} of them)" for p, (f, ok) in s["plans"].items())
         lines.append(f"- plans: {plans}")
@@ -113,14 +121,20 @@ def to_markdown(task_id: str, s: dict) -> str:
     lines.append(f"- object draws: {s['object draws']}")
     per = ", ".join(f"{o} {r:.1%} (n={n})" for o, (r, n) in s["pick-and-place success by object"].items())
     lines.append(f"- pick-and-place success (placed in the intended bin; real grasps) by object: {per}")
-    lines += ["", "| stage | episodes | grasped | grasp failed | placed in intended bin | in a bin | "
-              "in its correct bin | wrong bin chosen |", "|---|---|---|---|---|---|---|---|"]
+    lines += [
+        "",
+        "| stage | episodes | grasped | grasp failed | placed in intended bin | in a bin | "
+        "in its correct bin | wrong bin chosen |",
+        "|---|---|---|---|---|---|---|---|",
+    ]
     for k, v in s.items():
         if k.startswith("stage"):
             gr = v["grasped (lifted off the table)"]
-            lines.append(f"| {k} | {v['episodes']} | {gr:.1%} | {1 - gr:.1%} | {v['placed in the intended bin']:.1%} | "
-                         f"{v['ended in a bin']:.1%} | {v['ended in its correct bin']:.1%} | "
-                         f"{v['wrong bin chosen']:.1%} |")
+            lines.append(
+                f"| {k} | {v['episodes']} | {gr:.1%} | {1 - gr:.1%} | {v['placed in the intended bin']:.1%} | "
+                f"{v['ended in a bin']:.1%} | {v['ended in its correct bin']:.1%} | "
+                f"{v['wrong bin chosen']:.1%} |"
+            )
     return "\n".join(lines)
 
 
@@ -134,7 +148,7 @@ def first_frames(n: int = 8, size: int = 128) -> np.ndarray:
     for i in range(n):
         ep = gen.episode(i, episode_rng(spec.dataset.default_seed, i))
         frames.append(render_states(ep.arrays["states"][:1], ep.meta, size=size)[0])
-    rows = [np.concatenate(frames[k: k + n // 2], axis=1) for k in (0, n // 2)]
+    rows = [np.concatenate(frames[k : k + n // 2], axis=1) for k in (0, n // 2)]
     return np.concatenate(rows, axis=0)
 
 

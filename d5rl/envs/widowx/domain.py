@@ -49,7 +49,7 @@ class Domain:
         return {k: (list(v) if isinstance(v, tuple) else v) for k, v in dataclasses.asdict(self).items()}
 
     @classmethod
-    def from_json(cls, d: dict[str, Any]) -> "Domain":
+    def from_json(cls, d: dict[str, Any]) -> Domain:
         fields = {f.name for f in dataclasses.fields(cls)}
         if set(d) != fields:
             from d5rl.errors import DatasetVersionError
@@ -57,7 +57,8 @@ class Domain:
             raise DatasetVersionError(
                 f"this WidowX episode's domain differs from the current scene's in fields {sorted(set(d) ^ fields)}: "
                 "it comes from an older dataset version",
-                "regenerate the dataset with `d5rl generate TASK --force`")
+                "regenerate the dataset with `d5rl generate TASK --force`",
+            )
         return cls(**{k: (tuple(v) if isinstance(v, list) else v) for k, v in d.items()})
 
     @property
@@ -81,10 +82,27 @@ def sample_domain(rng: np.random.Generator, randomize: bool = True, shoes=SHOES,
     toy = str(toys[rng.integers(len(toys))])
     first = {k: v[0] for k, v in SURFACE_TEXTURES.items()}
     if not randomize:
-        return Domain(shoe, toy, first["table"], (1.0, 1.0, 1.0), first["floor"], (1.0, 1.0, 1.0), first["wall"],
-                      (1.0, 1.0, 1.0), (0.92, 0.92, 0.92), (0.2, 0.3, 0.7), (0.95, 0.95, 0.95), (0.95, 0.8, 0.1),
-                      KEY_LIGHT_POS, (0.6, 0.6, 0.6), (0.3, 0.3, 0.3), 0.25,
-                      SIDE_CAMERA["pos"], SIDE_CAMERA["lookat"], SIDE_CAMERA["fovy"])
+        return Domain(
+            shoe,
+            toy,
+            first["table"],
+            (1.0, 1.0, 1.0),
+            first["floor"],
+            (1.0, 1.0, 1.0),
+            first["wall"],
+            (1.0, 1.0, 1.0),
+            (0.92, 0.92, 0.92),
+            (0.2, 0.3, 0.7),
+            (0.95, 0.95, 0.95),
+            (0.95, 0.8, 0.1),
+            KEY_LIGHT_POS,
+            (0.6, 0.6, 0.6),
+            (0.3, 0.3, 0.3),
+            0.25,
+            SIDE_CAMERA["pos"],
+            SIDE_CAMERA["lookat"],
+            SIDE_CAMERA["fovy"],
+        )
     u = rng.uniform
 
     def pick(surface: str) -> str:
@@ -130,9 +148,11 @@ def apply_domain(model: mujoco.MjModel, domain: Domain) -> None:
     def tex(name):
         return mujoco.mj_name2id(model, mujoco.mjtObj.mjOBJ_TEXTURE, name)
 
-    for surface, name, color in (("table", domain.table_texture, domain.table_rgb),
-                                 ("floor", domain.floor_texture, domain.floor_rgb),
-                                 ("wall", domain.wall_texture, domain.wall_rgb)):
+    for surface, name, color in (
+        ("table", domain.table_texture, domain.table_rgb),
+        ("floor", domain.floor_texture, domain.floor_rgb),
+        ("wall", domain.wall_texture, domain.wall_rgb),
+    ):
         if name not in SURFACE_TEXTURES[surface]:
             raise ValueError(f"unknown {surface} texture {name!r}; one of {SURFACE_TEXTURES[surface]}")
         model.mat_texid[mat(surface), rgb] = -1 if name == "plain" else tex(texture_name(name))

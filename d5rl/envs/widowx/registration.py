@@ -42,8 +42,12 @@ PICKPLACE_DATA = DatasetSpec(
 STATE = "joint positions, tip and object poses (25)"
 
 for name, dataset, desc in (
-    ("sorting", SORTING_DATA, "data: a scripted policy sorting one or both objects, mostly failing the whole "
-     "task (wrong bin 30% of the time)."),
+    (
+        "sorting",
+        SORTING_DATA,
+        "data: a scripted policy sorting one or both objects, mostly failing the whole "
+        "task (wrong bin 30% of the time).",
+    ),
     ("sorting-pickplacedata", PICKPLACE_DATA, "the agent must chain two of the data's single pick-and-places."),
 ):
     # each task twice: from the side camera (the benchmark) and, as "-state", from simulator state

@@ -35,18 +35,18 @@ class SceneIndex:
 
     def object_pose(self, data: mujoco.MjData, name: str) -> tuple[np.ndarray, np.ndarray]:
         a = self.obj_qpos[name]
-        return data.qpos[a: a + 3].copy(), data.qpos[a + 3: a + 7].copy()
+        return data.qpos[a : a + 3].copy(), data.qpos[a + 3 : a + 7].copy()
 
     def object_speed(self, data: mujoco.MjData, name: str) -> float:
         """Linear speed plus 0.1 m x angular speed of an object (m/s)."""
         v = self.obj_dof[name]
-        return float(np.linalg.norm(data.qvel[v: v + 3]) + 0.1 * np.linalg.norm(data.qvel[v + 3: v + 6]))
+        return float(np.linalg.norm(data.qvel[v : v + 3]) + 0.1 * np.linalg.norm(data.qvel[v + 3 : v + 6]))
 
     def set_object_pose(self, data: mujoco.MjData, name: str, pos, quat) -> None:
         a, v = self.obj_qpos[name], self.obj_dof[name]
-        data.qpos[a: a + 3] = pos
-        data.qpos[a + 3: a + 7] = quat
-        data.qvel[v: v + 6] = 0.0
+        data.qpos[a : a + 3] = pos
+        data.qpos[a + 3 : a + 7] = quat
+        data.qvel[v : v + 6] = 0.0
 
 
 def _body_bbox(model: mujoco.MjModel, body: int) -> tuple[np.ndarray, np.ndarray]:
@@ -60,7 +60,7 @@ def _body_bbox(model: mujoco.MjModel, body: int) -> tuple[np.ndarray, np.ndarray
         mujoco.mju_quat2Mat(rot, model.geom_quat[g])
         if model.geom_type[g] == mujoco.mjtGeom.mjGEOM_MESH:
             m = model.geom_dataid[g]
-            local = model.mesh_vert[model.mesh_vertadr[m]: model.mesh_vertadr[m] + model.mesh_vertnum[m]]
+            local = model.mesh_vert[model.mesh_vertadr[m] : model.mesh_vertadr[m] + model.mesh_vertnum[m]]
         else:
             local = model.geom_aabb[g][:3] + signs * model.geom_aabb[g][3:]
         points.append(model.geom_pos[g] + local @ rot.reshape(3, 3).T)
@@ -81,7 +81,9 @@ def in_bin(pos: np.ndarray, bin_name: str) -> bool:
     """
     cx, cy = BIN_CENTERS[bin_name]
     return bool(
-        abs(pos[0] - cx) < BIN_INNER_HALF and abs(pos[1] - cy) < BIN_INNER_HALF and pos[2] < BIN_FLOOR + BIN_HEIGHT + 0.02
+        abs(pos[0] - cx) < BIN_INNER_HALF
+        and abs(pos[1] - cy) < BIN_INNER_HALF
+        and pos[2] < BIN_FLOOR + BIN_HEIGHT + 0.02
         and pos[2] > -0.01
     )
 

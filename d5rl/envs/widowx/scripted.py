@@ -39,8 +39,15 @@ class ScriptedSorter:
     botches its grasp (default: none).
     """
 
-    def __init__(self, env, objects: list[str], targets: list[str], rng: np.random.Generator, noise: float = 0.15,
-                 miss: list[bool] | None = None):
+    def __init__(
+        self,
+        env,
+        objects: list[str],
+        targets: list[str],
+        rng: np.random.Generator,
+        noise: float = 0.15,
+        miss: list[bool] | None = None,
+    ):
         self.env = env
         self.objects = list(objects)
         self.targets = list(targets)

@@ -49,8 +49,9 @@ def _photo(name: str) -> np.ndarray:
     """uint8 (TEXTURE_SIZE, TEXTURE_SIZE, 3): a kitchen texture photo, cropped square and box-filtered."""
     import imageio.v3 as iio  # a dependency of d5rl (reads PNG through pillow)
 
-    path = asset_path("gymnasium-robotics", "envs", "assets", "kitchen_franka", "kitchen_assets", "textures",
-                      f"{name}.png")
+    path = asset_path(
+        "gymnasium-robotics", "envs", "assets", "kitchen_franka", "kitchen_assets", "textures", f"{name}.png"
+    )
     img = np.asarray(iio.imread(path))[..., :3].astype(np.float64)
     k = min(img.shape[:2]) // TEXTURE_SIZE
     img = img[: k * TEXTURE_SIZE, : k * TEXTURE_SIZE]
@@ -87,8 +88,13 @@ def texture_name(name: str) -> str:
 
 def _add_textures(spec: mujoco.MjSpec) -> None:
     for name, img in texture_images().items():
-        t = spec.add_texture(name=texture_name(name), type=mujoco.mjtTexture.mjTEXTURE_2D, width=img.shape[1],
-                             height=img.shape[0], nchannel=3)
+        t = spec.add_texture(
+            name=texture_name(name),
+            type=mujoco.mjtTexture.mjTEXTURE_2D,
+            width=img.shape[1],
+            height=img.shape[0],
+            nchannel=3,
+        )
         t.data = img.tobytes()
     rgb = mujoco.mjtTextureRole.mjTEXROLE_RGB
     for surface, repeat in (("table", (2, 2)), ("floor", (8, 8)), ("wall", (4, 2))):
@@ -128,30 +134,63 @@ def add_tabletop(spec: mujoco.MjSpec) -> None:
     # The room holds what falls off the table: floor, walls and legs collide (dataset v3; before, they were
     # visual only and a toy thrown off the table fell forever).
     floor_z = -TABLE_HEIGHT
-    wb.add_geom(name="floor", type=mujoco.mjtGeom.mjGEOM_PLANE, size=[3, 3, 0.1], pos=[0, 0, floor_z],
-                material="floor")
+    wb.add_geom(name="floor", type=mujoco.mjtGeom.mjGEOM_PLANE, size=[3, 3, 0.1], pos=[0, 0, floor_z], material="floor")
     mid_z = floor_z + WALL_HEIGHT / 2
     box(wb, "wall_back", (0.01, SIDE_WALL_Y, WALL_HEIGHT / 2), (BACK_WALL_X - 0.01, 0, mid_z), material="wall")
     for sign, side in ((1, "left"), (-1, "right")):
-        box(wb, f"wall_{side}", (1.5, 0.01, WALL_HEIGHT / 2), (BACK_WALL_X + 1.5, sign * (SIDE_WALL_Y + 0.01), mid_z),
-             material="wall")
+        box(
+            wb,
+            f"wall_{side}",
+            (1.5, 0.01, WALL_HEIGHT / 2),
+            (BACK_WALL_X + 1.5, sign * (SIDE_WALL_Y + 0.01), mid_z),
+            material="wall",
+        )
     hx, hy = TABLE_HALF
-    box(wb, "table", (hx, hy, TABLE_THICKNESS / 2), (TABLE_CENTER_X, 0.0, -TABLE_THICKNESS / 2), material="table",
-         friction=[0.8, 0.01, 0.001], condim=3)
+    box(
+        wb,
+        "table",
+        (hx, hy, TABLE_THICKNESS / 2),
+        (TABLE_CENTER_X, 0.0, -TABLE_THICKNESS / 2),
+        material="table",
+        friction=[0.8, 0.01, 0.001],
+        condim=3,
+    )
     leg_h = (TABLE_HEIGHT - TABLE_THICKNESS) / 2
     for sx in (-1, 1):
         for sy in (-1, 1):
             pos = (TABLE_CENTER_X + sx * (hx - 0.06), sy * (hy - 0.06), floor_z + leg_h)
-            box(wb, f"table_leg_{'f' if sx > 0 else 'b'}{'l' if sy > 0 else 'r'}", (LEG_HALF, LEG_HALF, leg_h), pos,
-                 material="table_leg")
+            box(
+                wb,
+                f"table_leg_{'f' if sx > 0 else 'b'}{'l' if sy > 0 else 'r'}",
+                (LEG_HALF, LEG_HALF, leg_h),
+                pos,
+                material="table_leg",
+            )
     for k, c in BIN_CENTERS.items():
         _add_bin(spec, k, c)
-    wb.add_light(name="key", pos=list(KEY_LIGHT_POS), dir=[0.0, 0.4, -1.0], diffuse=[0.6, 0.6, 0.6],
-                 castshadow=False, type=mujoco.mjtLightType.mjLIGHT_SPOT, cutoff=60.0)
-    wb.add_light(name="fill", pos=[0.6, 0.6, 1.0], dir=[-0.4, -0.6, -1.0], diffuse=[0.3, 0.3, 0.3],
-                 castshadow=False, type=mujoco.mjtLightType.mjLIGHT_DIRECTIONAL)
-    wb.add_camera(name="side", pos=list(SIDE_CAMERA["pos"]), fovy=SIDE_CAMERA["fovy"],
-                  quat=list(lookat_quat(SIDE_CAMERA["pos"], SIDE_CAMERA["lookat"])))
+    wb.add_light(
+        name="key",
+        pos=list(KEY_LIGHT_POS),
+        dir=[0.0, 0.4, -1.0],
+        diffuse=[0.6, 0.6, 0.6],
+        castshadow=False,
+        type=mujoco.mjtLightType.mjLIGHT_SPOT,
+        cutoff=60.0,
+    )
+    wb.add_light(
+        name="fill",
+        pos=[0.6, 0.6, 1.0],
+        dir=[-0.4, -0.6, -1.0],
+        diffuse=[0.3, 0.3, 0.3],
+        castshadow=False,
+        type=mujoco.mjtLightType.mjLIGHT_DIRECTIONAL,
+    )
+    wb.add_camera(
+        name="side",
+        pos=list(SIDE_CAMERA["pos"]),
+        fovy=SIDE_CAMERA["fovy"],
+        quat=list(lookat_quat(SIDE_CAMERA["pos"], SIDE_CAMERA["lookat"])),
+    )
 
 
 def lookat_quat(pos, lookat) -> np.ndarray:

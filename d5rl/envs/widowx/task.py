@@ -67,8 +67,8 @@ import numpy as np
 
 from d5rl.envs.base import MujocoEnv
 from d5rl.envs.widowx import controller
-from d5rl.envs.widowx import model as wm
 from d5rl.envs.widowx import domain as wdom
+from d5rl.envs.widowx import model as wm
 from d5rl.envs.widowx import scene as wscene
 
 FRAME_SKIP = 50  # 10 Hz control with 2 ms physics steps
@@ -112,9 +112,15 @@ class WidowXSortingEnv(MujocoEnv):
         if obs_mode not in ("pixels", "state"):
             raise ValueError(f"obs_mode must be 'pixels' or 'state', got {obs_mode!r}")
         model = wm.load_model()
-        super().__init__(model, FRAME_SKIP, render_mode=render_mode,
-                         render_size=render_size or (image_size, image_size), render_camera="side", width=width,
-                         height=height)
+        super().__init__(
+            model,
+            FRAME_SKIP,
+            render_mode=render_mode,
+            render_size=render_size or (image_size, image_size),
+            render_camera="side",
+            width=width,
+            height=height,
+        )
         self.obs_mode = obs_mode
         self.image_size = int(image_size)
         self.randomize = bool(randomize)
@@ -177,9 +183,15 @@ class WidowXSortingEnv(MujocoEnv):
             "is_success": count == 2,
             "shoe_bin": where[self.domain.shoe],
             "toy_bin": where[self.domain.toy],
-            "episode_stats": {f"{wm.CATEGORY[n]}/{k}": float(v) for n in self.domain.objects for k, v in (
-                ("lifted", self._lifted[n]), ("in_its_bin", where[n] == wm.CATEGORY[n]),
-                ("in_other_bin", where[n] not in (None, wm.CATEGORY[n])))},
+            "episode_stats": {
+                f"{wm.CATEGORY[n]}/{k}": float(v)
+                for n in self.domain.objects
+                for k, v in (
+                    ("lifted", self._lifted[n]),
+                    ("in_its_bin", where[n] == wm.CATEGORY[n]),
+                    ("in_other_bin", where[n] not in (None, wm.CATEGORY[n])),
+                )
+            },
         }
 
     # --- reset -------------------------------------------------------------------

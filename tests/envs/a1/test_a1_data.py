@@ -6,17 +6,17 @@ import pytest
 import d5rl
 from d5rl.datasets.generation import episode_rng, make_generator
 from d5rl.envs.a1 import data
-from d5rl.envs.a1.calibrate import evaluate
 from d5rl.envs.a1.agents import AGENTS, POLICY_DIR
+from d5rl.envs.a1.calibrate import evaluate
 from d5rl.envs.a1.policy import SnapshotPolicy
-
 
 
 def test_data_agents_policies_ship_with_the_package():
     # (reference agents ship their final policy only; `registration.SCORE_AGENTS` lists the candidates)
     # (v1 data agents ship once trained: registration says so until then)
-    for agent in (a for a, spec in AGENTS.items() if spec.role == "data" and (spec.env_version == 0
-                                                                              or (POLICY_DIR / a).exists())):
+    for agent in (
+        a for a, spec in AGENTS.items() if spec.role == "data" and (spec.env_version == 0 or (POLICY_DIR / a).exists())
+    ):
         log = POLICY_DIR / agent / "log.json"
         assert log.exists() and (POLICY_DIR / agent / "final.npz").exists(), agent
         for seg in data.agent_log(agent)["segments"]:
@@ -67,11 +67,15 @@ def test_hiking_relabel_matches_heading_agent_reward():
 
 
 @pytest.mark.slow
-@pytest.mark.parametrize("agent, low, high", [
-    ("speed-0.5", 0.475, 0.525), ("speed-0.8", 0.76, 0.84),  # the speed bar: within 5% of the target
-    ("speed-1.0", 0.85, 1.05),  # at this actuation's ceiling (~0.9 m/s, A1 data card), not at 1.0
-    ("hiking", 0.65, 0.85),  # the course reference, on the course
-])
+@pytest.mark.parametrize(
+    "agent, low, high",
+    [
+        ("speed-0.5", 0.475, 0.525),
+        ("speed-0.8", 0.76, 0.84),  # the speed bar: within 5% of the target
+        ("speed-1.0", 0.85, 1.05),  # at this actuation's ceiling (~0.9 m/s, A1 data card), not at 1.0
+        ("hiking", 0.65, 0.85),  # the course reference, on the course
+    ],
+)
 def test_shipped_agents_track_their_speed_without_falling(agent, low, high):
     from d5rl.envs.a1.speedcheck import rollouts
 
@@ -83,8 +87,10 @@ def test_shipped_agents_track_their_speed_without_falling(agent, low, high):
 @pytest.mark.slow
 def test_expert_beats_random_on_walk():
     rnd = np.mean(evaluate("a1-walk-v0", SnapshotPolicy(None), 3, 0, deterministic=False)["returns"])
-    best = max(np.mean(evaluate("a1-walk-v0", SnapshotPolicy(POLICY_DIR / a / "final.npz"), 3, 0)["returns"])
-               for a in ("speed-0.5", "speed-0.8", "speed-1.0"))
+    best = max(
+        np.mean(evaluate("a1-walk-v0", SnapshotPolicy(POLICY_DIR / a / "final.npz"), 3, 0)["returns"])
+        for a in ("speed-0.5", "speed-0.8", "speed-1.0")
+    )
     assert best > 2 * rnd
 
 
@@ -102,7 +108,10 @@ def test_calibration_records_the_experts_speed(monkeypatch, capsys):
         def __init__(self, path):
             self.name = path.parent.name if path else "random"
 
-    returns, agent_speeds = {"random": 100.0, "speed-0.5": 200.0, "speed-0.8": 300.0}, {"speed-0.5": 0.5, "speed-0.8": 0.7}
+    returns, agent_speeds = (
+        {"random": 100.0, "speed-0.5": 200.0, "speed-0.8": 300.0},
+        {"speed-0.5": 0.5, "speed-0.8": 0.7},
+    )
 
     def fake_evaluate(task, policy, episodes, seed, deterministic=True):
         return {"returns": [returns[policy.name]] * episodes, "speeds": [agent_speeds.get(policy.name, 0.0)] * episodes}
@@ -116,7 +125,8 @@ def test_calibration_records_the_experts_speed(monkeypatch, capsys):
     steps = data.agent_log("speed-0.8")["steps"]
     assert result["expert_trained"] == f"SAC, {steps:,} steps, tracking 0.8 m/s on flat ground"
     assert ref.expert == 300.0 and ref.expert_note == (
-        f"'speed-0.8' (SAC, {steps:,} steps, tracking 0.8 m/s on flat ground) runs 0.70 m/s on average on this task")
+        f"'speed-0.8' (SAC, {steps:,} steps, tracking 0.8 m/s on flat ground) runs 0.70 m/s on average on this task"
+    )
     assert main(["info", "a1-walk-v0"]) == 0
     assert "the expert: 'speed-0.8' (SAC, " in capsys.readouterr().out  # the committed scores.json has both
 

@@ -37,9 +37,13 @@ def tol(x, lo, hi, margin, sigmoid, value_at_margin):
 
 def quat_to_mat(q):
     w, x, y, z = q / np.linalg.norm(q)
-    return np.array([[1 - 2 * (y * y + z * z), 2 * (x * y - w * z), 2 * (x * z + w * y)],
-                     [2 * (x * y + w * z), 1 - 2 * (x * x + z * z), 2 * (y * z - w * x)],
-                     [2 * (x * z - w * y), 2 * (y * z + w * x), 1 - 2 * (x * x + y * y)]])
+    return np.array(
+        [
+            [1 - 2 * (y * y + z * z), 2 * (x * y - w * z), 2 * (x * z + w * y)],
+            [2 * (x * y + w * z), 1 - 2 * (x * x + z * z), 2 * (y * z - w * x)],
+            [2 * (x * z - w * y), 2 * (y * z + w * x), 1 - 2 * (x * x + y * y)],
+        ]
+    )
 
 
 def release_run_reward(qpos, qvel, torque, target):
@@ -80,8 +84,13 @@ def _set(env, joints, lin_vel=(0.0, 0.0, 0.0), orientation=(0.0, 0.0, 0.0), join
 RNG = np.random.default_rng(7)
 STATES = {  # name: (joints, trunk linear velocity, (roll, pitch, yaw), joint velocities, targets)
     "at target, nominal": (NOMINAL, (0.75, 0, 0), (0, 0, 0), None, None),
-    "inside the joint bands": (NOMINAL + 0.9 * OFFSET * np.sign(RNG.normal(size=12)), (0.7, 0.1, 0), (0, 0, 0),
-                               None, None),
+    "inside the joint bands": (
+        NOMINAL + 0.9 * OFFSET * np.sign(RNG.normal(size=12)),
+        (0.7, 0.1, 0),
+        (0, 0, 0),
+        None,
+        None,
+    ),
     "joints at the band edge": (NOMINAL + OFFSET, (0.8, 0, 0), (0, 0, 0), None, None),
     "joints at the margin": (NOMINAL - 2 * OFFSET * np.tile([1, 0, 1], 4), (0.75, 0, 0), (0, 0, 0), None, None),
     "joints beyond the margin": (NOMINAL + 3 * OFFSET * np.tile([0, 1, 0], 4), (0.75, 0, 0), (0, 0, 0), None, None),
@@ -91,8 +100,13 @@ STATES = {  # name: (joints, trunk linear velocity, (roll, pitch, yaw), joint ve
     "pitched and turned": (NOMINAL, (0.6, 0.2, 0.1), (0.1, 0.3, 0.5), None, None),
     "upright at its edge": (NOMINAL, (0.75, 0, 0), (np.arccos(0.9), 0, 0), None, None),
     "tilted into the upright margin": (NOMINAL, (0.75, 0, 0), (0.2, 0.9, 0), None, None),
-    "moving joints, clipped torques": (NOMINAL + 0.1, (0.75, 0, 0), (0, 0, 0), RNG.normal(0, 3, 12),
-                                       NOMINAL + RNG.uniform(-1, 1, 12)),
+    "moving joints, clipped torques": (
+        NOMINAL + 0.1,
+        (0.75, 0, 0),
+        (0, 0, 0),
+        RNG.normal(0, 3, 12),
+        NOMINAL + RNG.uniform(-1, 1, 12),
+    ),
     "fallen on its side": (NOMINAL, (0.3, 0, 0), (np.pi / 2, 0, 0), RNG.normal(0, 2, 12), NOMINAL - 0.3),
 }
 
@@ -119,7 +133,7 @@ def test_reward_states_cover_the_margins(walk):
         return walk.reward_terms()[1]["standing"]
 
     assert standing("joints at the band edge") == pytest.approx(1.0)
-    assert standing("joints at the margin") == pytest.approx(0.5 ** 8)  # 8 joints at value_at_margin 0.5
+    assert standing("joints at the margin") == pytest.approx(0.5**8)  # 8 joints at value_at_margin 0.5
     assert standing("joints beyond the margin") == pytest.approx(np.exp(-0.5 * 4 * 2 * np.log(2)) ** 4)
     assert standing("upright at its edge") == pytest.approx(1.0)
     assert 0 < standing("tilted into the upright margin") < 1
@@ -234,8 +248,16 @@ def test_hiking_course_is_redrawn_per_episode_and_fixed_per_seed(hiking):
     assert h[mid, mid] < 0.06 and h[mid, 0] < 0.0  # low centre, edge under the plane
     # the wedges: crest 1.2 m at x = 12.25 and 26.25 (a ray from above hits it there)
     for x in (12.2, 26.3):
-        dist = mujoco.mj_ray(hiking.model, hiking.data, np.array([x, 0.0, 5.0]), np.array([0.0, 0.0, -1.0]),
-                             None, 1, -1, np.zeros(1, np.int32))
+        dist = mujoco.mj_ray(
+            hiking.model,
+            hiking.data,
+            np.array([x, 0.0, 5.0]),
+            np.array([0.0, 0.0, -1.0]),
+            None,
+            1,
+            -1,
+            np.zeros(1, np.int32),
+        )
         assert 5.0 - dist == pytest.approx(1.2, abs=0.02)
 
 
@@ -251,8 +273,9 @@ def test_hiking_reward_is_the_releases_runtoward_formula(hiking):
     standing = tol(rot[2, 2], 0.9, np.inf, 0.9, "quadratic", 0.0)
     for q, lo, hi, m in zip(qpos[7:], NOMINAL - OFFSET, NOMINAL + OFFSET, OFFSET):
         standing *= tol(q, lo, hi, m, "gaussian", 0.5)
-    expected = (10 * tol(speed, 0.9, 1.1, 1.0, "linear", 0) * tol(delta, -np.pi / 12, np.pi / 12, np.pi, "linear", 0)
-                * standing - 0.001 * np.sum(qvel[6:] * torque))
+    expected = 10 * tol(speed, 0.9, 1.1, 1.0, "linear", 0) * tol(
+        delta, -np.pi / 12, np.pi / 12, np.pi, "linear", 0
+    ) * standing - 0.001 * np.sum(qvel[6:] * torque)
     assert hiking.reward_terms()[0] == pytest.approx(expected, rel=1e-9, abs=1e-9)
 
 
@@ -327,9 +350,14 @@ def test_v1_dataset_fails_first_with_one_line_until_its_agents_are_published():
     assert "a1-walk-v1" not in resolve_tasks(["a1"]) and resolve_tasks(["a1-walk-v1"]) == ["a1-walk-v1"]
 
 
-@pytest.mark.parametrize("task,agent_env", [("a1-walk-v1", ("run", {"target_speed": 0.5})),
-                                            ("a1-run-v1", ("run", {"target_speed": 1.0})),
-                                            ("a1-hiking-v1", ("run_toward", {}))])
+@pytest.mark.parametrize(
+    "task,agent_env",
+    [
+        ("a1-walk-v1", ("run", {"target_speed": 0.5})),
+        ("a1-run-v1", ("run", {"target_speed": 1.0})),
+        ("a1-hiking-v1", ("run_toward", {})),
+    ],
+)
 def test_relabelling_the_data_agents_infos_gives_the_tasks_reward(task, agent_env):
     """The v1 datasets store the data agents' reward terms; each task recomputes its reward from them."""
     from d5rl.envs.a1 import data

@@ -28,9 +28,11 @@ from d5rl.registry import make_env
 REPO = Path(__file__).resolve().parents[3]
 V1_AGENTS = [a for a, s in AGENTS.items() if s.env_version == 1]
 # per data agent: uniform random actions, then two snapshots (the training log's segments)
-SEGMENTS = [{"snapshot": None, "start_step": 0, "episodes": 2, "steps": 800},
-            {"snapshot": "snapshot-01.npz", "start_step": 800, "episodes": 1, "steps": 400},
-            {"snapshot": "snapshot-02.npz", "start_step": 1200, "episodes": 1, "steps": 400}]
+SEGMENTS = [
+    {"snapshot": None, "start_step": 0, "episodes": 2, "steps": 800},
+    {"snapshot": "snapshot-01.npz", "start_step": 800, "episodes": 1, "steps": 400},
+    {"snapshot": "snapshot-02.npz", "start_step": 1200, "episodes": 1, "steps": 400},
+]
 
 
 def _actor(rng: np.random.Generator, obs_dim: int, hidden=(32, 32)) -> dict:
@@ -59,10 +61,15 @@ def policies(tmp_path_factory) -> Path:
 
 
 def d5rl_cli(policies: Path, home: Path, *args: str) -> str:
-    env = {**os.environ, "D5RL_A1_POLICIES": str(policies), "D5RL_HOME": str(home),
-           "PYTHONPATH": os.pathsep.join([str(REPO), os.environ.get("PYTHONPATH", "")])}
-    proc = subprocess.run([sys.executable, "-m", "d5rl.cli", *args], env=env, capture_output=True, text=True,
-                          timeout=600)
+    env = {
+        **os.environ,
+        "D5RL_A1_POLICIES": str(policies),
+        "D5RL_HOME": str(home),
+        "PYTHONPATH": os.pathsep.join([str(REPO), os.environ.get("PYTHONPATH", "")]),
+    }
+    proc = subprocess.run(
+        [sys.executable, "-m", "d5rl.cli", *args], env=env, capture_output=True, text=True, timeout=600
+    )
     assert proc.returncode == 0, proc.stderr[-3000:]
     return proc.stdout
 
@@ -87,8 +94,7 @@ def hiking_home(policies, tmp_path_factory) -> Path:
 def hiking_data(hiking_home, policies, monkeypatch):
     monkeypatch.setenv("D5RL_HOME", str(hiking_home))
     monkeypatch.setattr(a1_data, "POLICY_DIR", policies)  # what D5RL_A1_POLICIES does in a new process
-    return load_dataset(published("a1-hiking-v1", ("goals-mixed-v1",)), generate=False, progress=False,
-                        in_memory=True)
+    return load_dataset(published("a1-hiking-v1", ("goals-mixed-v1",)), generate=False, progress=False, in_memory=True)
 
 
 def test_generation_runs_the_policies_without_xla():
@@ -150,8 +156,11 @@ def test_generated_v1_hiking_data_replays_on_its_own_floors(hiking_data):
 
 def test_the_tasks_own_env_would_not_replay_a_bumpy_episode(hiking_data):
     """Why the replay env exists: on the hiking course (or any other floor) the stored dynamics break."""
-    ep = next(e for e in hiking_data.episodes() if replay_env(d5rl.get_spec("a1-hiking-v1"), e.meta)
-              .model.geom(arenas.FIELD).pos[2] == arenas.FIELD_Z)
+    ep = next(
+        e
+        for e in hiking_data.episodes()
+        if replay_env(d5rl.get_spec("a1-hiking-v1"), e.meta).model.geom(arenas.FIELD).pos[2] == arenas.FIELD_Z
+    )
     env = make_env("a1-hiking-v1").unwrapped
     env.reset(seed=0)
     states, actions = ep.arrays["states"], ep.arrays["actions"]
@@ -163,8 +172,11 @@ def test_the_tasks_own_env_would_not_replay_a_bumpy_episode(hiking_data):
 def test_render_episode_replays_on_the_episodes_floor(hiking_data, hiking_home, policies, tmp_path):
     from d5rl.registry import make_replay_env
 
-    i = next(i for i, m in enumerate(hiking_data.episode_meta)
-             if replay_env(d5rl.get_spec("a1-hiking-v1"), m).model.geom(arenas.FIELD).pos[2] == arenas.FIELD_Z)
+    i = next(
+        i
+        for i, m in enumerate(hiking_data.episode_meta)
+        if replay_env(d5rl.get_spec("a1-hiking-v1"), m).model.geom(arenas.FIELD).pos[2] == arenas.FIELD_Z
+    )
     env = make_replay_env("a1-hiking-v1", hiking_data.episode_meta[i])  # the dataset's replay, not the course
     assert isinstance(env.task, v1.RunToward) and not isinstance(env.task, v1.Hiking)
     env.close()
@@ -180,8 +192,10 @@ def test_v1_datacard_stage_shares_and_speed_histogram(hiking_data):
     by_stage = {}
     for m, n in zip(hiking_data.episode_meta, lengths):
         by_stage[m["segment"]] = by_stage.get(m["segment"], 0) + n
-    expected = [(seg, SEGMENTS[seg]["snapshot"] or "random", SEGMENTS[seg]["start_step"], by_stage[seg] / sum(lengths))
-                for seg in sorted(by_stage)]
+    expected = [
+        (seg, SEGMENTS[seg]["snapshot"] or "random", SEGMENTS[seg]["start_step"], by_stage[seg] / sum(lengths))
+        for seg in sorted(by_stage)
+    ]
     got = stage_shares(hiking_data)["goals-mixed-v1"]
     assert [g[:3] for g in got] == [e[:3] for e in expected]
     np.testing.assert_allclose([g[3] for g in got], [e[3] for e in expected])
@@ -191,7 +205,7 @@ def test_v1_datacard_stage_shares_and_speed_histogram(hiking_data):
     text = describe((published("a1-hiking-v1", ("goals-mixed-v1",)),))
     assert "`a1-v1-hiking` (used by `a1-hiking-v1`)" in text
     assert f"| 0: random | {100 * expected[0][3]:.1f}% (step 0) |" in text
-    table = text[text.index("| forward speed (m/s) | all steps | `goals-mixed-v1` |"):].splitlines()[2:]
+    table = text[text.index("| forward speed (m/s) | all steps | `goals-mixed-v1` |") :].splitlines()[2:]
     assert [r.split(" | ")[-1].rstrip(" |") for r in table] == [f"{100 * c / counts.sum():.1f}%" for c in counts]
 
 
@@ -200,8 +214,9 @@ def test_v1_locomotion_generate_verify_load(policies, tmp_path, monkeypatch):
     assert d5rl_cli(policies, tmp_path, "verify", "a1-walk-v1").startswith("OK: 1 shards intact")
     monkeypatch.setenv("D5RL_HOME", str(tmp_path))
     monkeypatch.setattr(a1_data, "POLICY_DIR", policies)
-    walk = load_dataset(published("a1-walk-v1", tuple(a for a in V1_AGENTS if a.startswith("speed"))),
-                        generate=False, progress=False)
+    walk = load_dataset(
+        published("a1-walk-v1", tuple(a for a in V1_AGENTS if a.startswith("speed"))), generate=False, progress=False
+    )
     assert walk.num_episodes == 6 and walk.arrays["observations"].shape[1] == 58
     assert {m["agent"] for m in walk.episode_meta} <= {"speed-0.5-v1", "speed-0.8-v1", "speed-1.0-v1"}
     ep = walk.episode(0)
@@ -244,9 +259,12 @@ def test_smooth_hiking_variant_holds_goals_smooth_episodes_on_the_plane(policies
     monkeypatch.setenv("D5RL_HOME", str(tmp_path))
     monkeypatch.setattr(a1_data, "POLICY_DIR", policies)
     n = sum(s["episodes"] for s in SEGMENTS)
-    ds = load_dataset(dataclasses.replace(spec, dataset=dataclasses.replace(spec.dataset, num_episodes=n,
-                                                                            unavailable=None)),
-                      generate=False, progress=False, episodes=4)
+    ds = load_dataset(
+        dataclasses.replace(spec, dataset=dataclasses.replace(spec.dataset, num_episodes=n, unavailable=None)),
+        generate=False,
+        progress=False,
+        episodes=4,
+    )
     for m in ds.episode_meta:
         assert m["agent"] == "goals-smooth-v1"
         env = replay_env(spec, m)
@@ -261,8 +279,16 @@ def test_browse_renders_an_episode_on_its_own_floor(hiking_data):
     ep = hiking_data.episode(0)
     spec = d5rl.get_spec("a1-hiking-v1")
     shown = frames.render_states(spec, ep.arrays["states"][:2], ep.meta)["observations/pixels/view"]
-    expected = np.stack(list(replay_frames(replay_env(spec, ep.meta, render_mode="rgb_array"), ep.arrays["states"][:2],
-                                           frames.ENV_VIEW_SIZE, "fast")))
+    expected = np.stack(
+        list(
+            replay_frames(
+                replay_env(spec, ep.meta, render_mode="rgb_array"),
+                ep.arrays["states"][:2],
+                frames.ENV_VIEW_SIZE,
+                "fast",
+            )
+        )
+    )
     np.testing.assert_array_equal(shown, expected)
     course = make_env("a1-hiking-v1", render_mode="rgb_array")
     course.reset(seed=0)
@@ -280,12 +306,35 @@ def test_trained_and_published_agent_generates_v1_data(policies, tmp_path, monke
             (shipped / agent).mkdir(parents=True, exist_ok=True)
             (shipped / agent / f.name).write_bytes(f.read_bytes())
     trainer = ["-m", "d5rl.envs.a1.experts"]
-    env = {**os.environ, "D5RL_A1_POLICIES": str(shipped),
-           "PYTHONPATH": os.pathsep.join([str(REPO), os.environ.get("PYTHONPATH", "")])}
-    for args in (["train", "--agents", "speed-0.5-v1", "--steps", "500", "--start-steps", "200", "--first-segment",
-                  "100", "--snapshot-every", "200", "--utd", "1", "--work-dir", str(tmp_path / "work"),
-                  "--policy-dir", str(tmp_path / "trained"), "--saved-dir", str(tmp_path / "saved")],
-                 ["publish", "--agents", "speed-0.5-v1", "--policy-dir", str(tmp_path / "trained")]):
+    env = {
+        **os.environ,
+        "D5RL_A1_POLICIES": str(shipped),
+        "PYTHONPATH": os.pathsep.join([str(REPO), os.environ.get("PYTHONPATH", "")]),
+    }
+    for args in (
+        [
+            "train",
+            "--agents",
+            "speed-0.5-v1",
+            "--steps",
+            "500",
+            "--start-steps",
+            "200",
+            "--first-segment",
+            "100",
+            "--snapshot-every",
+            "200",
+            "--utd",
+            "1",
+            "--work-dir",
+            str(tmp_path / "work"),
+            "--policy-dir",
+            str(tmp_path / "trained"),
+            "--saved-dir",
+            str(tmp_path / "saved"),
+        ],
+        ["publish", "--agents", "speed-0.5-v1", "--policy-dir", str(tmp_path / "trained")],
+    ):
         proc = subprocess.run([sys.executable, *trainer, *args], env=env, capture_output=True, text=True, timeout=600)
         assert proc.returncode == 0, proc.stderr[-3000:]
     log = json.loads((shipped / "speed-0.5-v1" / "log.json").read_text())
@@ -296,9 +345,11 @@ def test_trained_and_published_agent_generates_v1_data(policies, tmp_path, monke
     monkeypatch.setenv("D5RL_HOME", str(tmp_path / "home"))
     monkeypatch.setattr(a1_data, "POLICY_DIR", shipped)
     spec = d5rl.get_spec("a1-walk-v1")
-    ds = load_dataset(dataclasses.replace(spec, dataset=dataclasses.replace(spec.dataset, num_episodes=n,
-                                                                            unavailable=None)),
-                      generate=False, progress=False)
+    ds = load_dataset(
+        dataclasses.replace(spec, dataset=dataclasses.replace(spec.dataset, num_episodes=n, unavailable=None)),
+        generate=False,
+        progress=False,
+    )
     trained = [m for m in ds.episode_meta if m["agent"] == "speed-0.5-v1"]
     by_segment = {i: sum(m["segment"] == i for m in trained) for i in range(3)}
     assert by_segment == {i: s["episodes"] for i, s in enumerate(log["segments"])}  # the buffer, episode for episode
@@ -325,12 +376,22 @@ def test_data_from_other_policy_files_is_not_the_published_agents_data(policies,
 
     other = tmp_path / "policies"
     shutil.copytree(policies, other)
-    save_actor(_actor(np.random.default_rng(1), AGENTS["goals-mixed-v1"].obs_dim),
-               other / "goals-mixed-v1" / "snapshot-01.npz")
-    env = {**os.environ, "D5RL_A1_POLICIES": str(other), "D5RL_HOME": str(hiking_home),
-           "PYTHONPATH": os.pathsep.join([str(REPO), os.environ.get("PYTHONPATH", "")])}
-    proc = subprocess.run([sys.executable, "-m", "d5rl.cli", "verify", "a1-hiking-v1"], env=env,
-                          capture_output=True, text=True, timeout=600)
+    save_actor(
+        _actor(np.random.default_rng(1), AGENTS["goals-mixed-v1"].obs_dim), other / "goals-mixed-v1" / "snapshot-01.npz"
+    )
+    env = {
+        **os.environ,
+        "D5RL_A1_POLICIES": str(other),
+        "D5RL_HOME": str(hiking_home),
+        "PYTHONPATH": os.pathsep.join([str(REPO), os.environ.get("PYTHONPATH", "")]),
+    }
+    proc = subprocess.run(
+        [sys.executable, "-m", "d5rl.cli", "verify", "a1-hiking-v1"],
+        env=env,
+        capture_output=True,
+        text=True,
+        timeout=600,
+    )
     assert proc.returncode != 0
     assert "generator_inputs" in proc.stderr and "Traceback" not in proc.stderr, proc.stderr[-2000:]
     d5rl_cli(policies, hiking_home, "verify", "a1-hiking-v1")  # the files it was made from: intact
@@ -339,8 +400,10 @@ def test_data_from_other_policy_files_is_not_the_published_agents_data(policies,
     from d5rl.envs.a1.data import policy_digest
 
     spec = published("a1-hiking-v1", ("goals-mixed-v1",))
-    recorded = {**generation.data_identity(spec), "generator_inputs": {"goals-mixed-v1": policy_digest(
-        "goals-mixed-v1", other)}}
+    recorded = {
+        **generation.data_identity(spec),
+        "generator_inputs": {"goals-mixed-v1": policy_digest("goals-mixed-v1", other)},
+    }
     assert "other generator inputs" in generation.stale_data(spec, recorded)
     assert generation.stale_data(spec, generation.data_identity(spec)) is None
     assert generation.data_identity(spec)["generator_inputs"] == {"goals-mixed-v1": policy_digest("goals-mixed-v1")}

@@ -39,8 +39,16 @@ def test_narrow_band_rewards_the_target_not_the_slow_edge():
 def _train(tmp_path, name, max_minutes=None):
     from d5rl.envs.a1.experts import Trainer
 
-    t = Trainer(["speed-0.5", "run-1.25"], steps=90, seed=0, snapshot_every=30, start_steps=30, utd=1,
-                work_dir=tmp_path / name / "work", policy_dir=tmp_path / name / "policies")
+    t = Trainer(
+        ["speed-0.5", "run-1.25"],
+        steps=90,
+        seed=0,
+        snapshot_every=30,
+        start_steps=30,
+        utd=1,
+        work_dir=tmp_path / name / "work",
+        policy_dir=tmp_path / name / "policies",
+    )
     return t.run(max_minutes=max_minutes, log_every=10**9)
 
 
@@ -66,7 +74,10 @@ def test_trainer_writes_snapshots_logs_and_resumes_bit_for_bit(tmp_path):
     assert sum(s["steps"] for s in log["segments"]) == 90
     # a reference agent saves snapshots too (a resume on another machine replays them)
     assert sorted(p.name for p in (tmp_path / "straight" / "policies" / "run-1.25").glob("*.npz")) == [
-        "final.npz", "snapshot-01.npz", "snapshot-02.npz"]
+        "final.npz",
+        "snapshot-01.npz",
+        "snapshot-02.npz",
+    ]
 
 
 def test_snapshot_boundaries_double_from_the_first_segment():
@@ -81,8 +92,17 @@ def test_trainer_snapshots_on_the_doubling_schedule(tmp_path):
     from d5rl.envs.a1.experts import Trainer
 
     policies = tmp_path / "policies"
-    Trainer(["speed-0.5"], steps=75, seed=0, snapshot_every=20, start_steps=30, utd=1, work_dir=tmp_path / "work",
-            policy_dir=policies, first_segment=5).run(log_every=10**9)
+    Trainer(
+        ["speed-0.5"],
+        steps=75,
+        seed=0,
+        snapshot_every=20,
+        start_steps=30,
+        utd=1,
+        work_dir=tmp_path / "work",
+        policy_dir=policies,
+        first_segment=5,
+    ).run(log_every=10**9)
     log = json.loads((policies / "speed-0.5" / "log.json").read_text())
     assert [s["start_step"] for s in log["segments"]] == [0, 30, 35, 45, 65]
     assert [s["steps"] for s in log["segments"]] == [30, 5, 10, 20, 10]
@@ -106,8 +126,18 @@ def test_v1_agents_train_resume_from_an_export_and_check(tmp_path, capsys):
     policies, saved = tmp_path / "policies", tmp_path / "saved"
 
     def trainer(machine, agents=("goals-mixed-v1", "goals-smooth-v1"), **kw):
-        return Trainer(list(agents), steps=40, seed=0, snapshot_every=20, start_steps=20, utd=1,
-                       work_dir=tmp_path / machine / "+".join(agents), policy_dir=policies, saved_root=saved, **kw)
+        return Trainer(
+            list(agents),
+            steps=40,
+            seed=0,
+            snapshot_every=20,
+            start_steps=20,
+            utd=1,
+            work_dir=tmp_path / machine / "+".join(agents),
+            policy_dir=policies,
+            saved_root=saved,
+            **kw,
+        )
 
     assert not trainer("a").run(max_minutes=0, log_every=10**9)  # stops at the first boundary (step 20)
     export(tmp_path / "a", saved)
@@ -120,8 +150,17 @@ def test_v1_agents_train_resume_from_an_export_and_check(tmp_path, capsys):
     # the hiking reference starts from the goals agent's final learner
     learners = tmp_path / "b" / "learners"
     assert (learners / "goals-mixed-v1.msgpack").exists()
-    hiking = Trainer(["hiking-v1"], steps=25, seed=0, snapshot_every=20, start_steps=20, utd=1,
-                     work_dir=tmp_path / "b" / "hiking-v1", policy_dir=policies, init_from="goals-mixed-v1")
+    hiking = Trainer(
+        ["hiking-v1"],
+        steps=25,
+        seed=0,
+        snapshot_every=20,
+        start_steps=20,
+        utd=1,
+        work_dir=tmp_path / "b" / "hiking-v1",
+        policy_dir=policies,
+        init_from="goals-mixed-v1",
+    )
     assert hiking.run(log_every=10**9)
     main(["check", "--agents", "goals-smooth-v1", "--episodes", "1", "--policy-dir", str(policies)])
     out = capsys.readouterr().out

@@ -14,9 +14,17 @@ def test_exported_checkpoint_resumes_on_a_machine_without_the_buffer(tmp_path):
     from d5rl.training.checkpoint import load_checkpoint
 
     def trainer(work):
-        return Trainer(["speed-0.5", "run-1.25"], steps=90, seed=0, snapshot_every=30, start_steps=30, utd=1,
-                       work_dir=work / "speed-0.5+run-1.25", policy_dir=tmp_path / "policies",
-                       saved_root=tmp_path / "saved")
+        return Trainer(
+            ["speed-0.5", "run-1.25"],
+            steps=90,
+            seed=0,
+            snapshot_every=30,
+            start_steps=30,
+            utd=1,
+            work_dir=work / "speed-0.5+run-1.25",
+            policy_dir=tmp_path / "policies",
+            saved_root=tmp_path / "saved",
+        )
 
     assert not trainer(tmp_path / "machine-a").run(max_minutes=0, log_every=10**9)  # stops at step 30
     export(tmp_path / "machine-a", tmp_path / "saved")
@@ -28,8 +36,10 @@ def test_exported_checkpoint_resumes_on_a_machine_without_the_buffer(tmp_path):
     # training time adds up over resumed processes: pretend the first one took 1000 s
     from d5rl.training.checkpoint import Checkpoint, save_checkpoint
 
-    save_checkpoint(tmp_path / "saved" / "checkpoints" / "speed-0.5+run-1.25",
-                    Checkpoint(saved.agent, {**saved.state, "train_seconds": 1000}))
+    save_checkpoint(
+        tmp_path / "saved" / "checkpoints" / "speed-0.5+run-1.25",
+        Checkpoint(saved.agent, {**saved.state, "train_seconds": 1000}),
+    )
     b = trainer(tmp_path / "machine-b")  # no checkpoint of its own
     learners = b._new_learners()
     _, t, _, _, segments = b._load(learners)
@@ -52,8 +62,16 @@ def test_training_time_of_a_checkpoint_from_before_it_was_stored_comes_from_the_
     from d5rl.training.checkpoint import Checkpoint, load_checkpoint, save_checkpoint
 
     def trainer():
-        return Trainer(["speed-0.5"], steps=60, seed=0, snapshot_every=30, start_steps=30, utd=1,
-                       work_dir=tmp_path / "work", policy_dir=tmp_path / "policies")
+        return Trainer(
+            ["speed-0.5"],
+            steps=60,
+            seed=0,
+            snapshot_every=30,
+            start_steps=30,
+            utd=1,
+            work_dir=tmp_path / "work",
+            policy_dir=tmp_path / "policies",
+        )
 
     assert not trainer().run(max_minutes=0, log_every=10**9)
     ckpt = load_checkpoint(tmp_path / "work")
@@ -71,8 +89,16 @@ def test_publish_ships_a_data_agents_snapshots_and_a_reference_agents_final_poli
     from d5rl.errors import D5RLError
 
     trained, shipped = tmp_path / "policies", tmp_path / "shipped"
-    t = Trainer(["speed-0.5", "run-1.25"], steps=60, seed=0, snapshot_every=30, start_steps=30, utd=1,
-                work_dir=tmp_path / "work", policy_dir=trained)
+    t = Trainer(
+        ["speed-0.5", "run-1.25"],
+        steps=60,
+        seed=0,
+        snapshot_every=30,
+        start_steps=30,
+        utd=1,
+        work_dir=tmp_path / "work",
+        policy_dir=trained,
+    )
     assert not t.run(max_minutes=0, log_every=10**9)  # stopped at step 30: not finished
     with pytest.raises(D5RLError, match="has not finished"):
         publish(["speed-0.5"], trained, shipped)

@@ -48,8 +48,9 @@ def test_dataset_round_trip_relabel_and_renders(monkeypatch, tmp_path):
     step_done = checker.completed(qpos_of_states(ds.arrays["states"], env.model.nq))
     next_rows = ds.transition_step + 1
     np.testing.assert_array_equal(step_done[next_rows], ds.arrays["infos/completed"])
-    np.testing.assert_array_equal(np.asarray(ds.arrays["observations/proprio"]),
-                                  qpos_of_states(ds.arrays["states"], 9).astype(np.float32))
+    np.testing.assert_array_equal(
+        np.asarray(ds.arrays["observations/proprio"]), qpos_of_states(ds.arrays["states"], 9).astype(np.float32)
+    )
     # the -state tasks' observations, read from the stored states without simulating, are the env's
     observed = state_episode({"states": ds.arrays["states"]}, {})["observations"]
     for row in (0, 60, len(observed) - 1):
@@ -66,8 +67,24 @@ def test_dataset_round_trip_relabel_and_renders(monkeypatch, tmp_path):
     twin = load_dataset("kitchen-standard-mixed-state-v0", episodes=2, progress=False, render=False)
     np.testing.assert_array_equal(twin.arrays["states"], ds.arrays["states"])
     assert "observations" not in twin.arrays and not (Path(twin.metadata["root"]) / "renders" / "state").exists()
-    assert main(["render", "kitchen-standard-mixed-state-v0", "--episode", "1", "--steps", "2", "--size", "16x16",
-                 "--out", str(tmp_path / "ep.mp4"), "--no-progress"]) == 0
+    assert (
+        main(
+            [
+                "render",
+                "kitchen-standard-mixed-state-v0",
+                "--episode",
+                "1",
+                "--steps",
+                "2",
+                "--size",
+                "16x16",
+                "--out",
+                str(tmp_path / "ep.mp4"),
+                "--no-progress",
+            ]
+        )
+        == 0
+    )
     partial = load_dataset("kitchen-standard-partial-v0", episodes=2, workers=1, progress=False, render=False)
     assert not np.array_equal(partial.rewards, ds.rewards)
     assert partial.rewards.max() <= 3  # never all four partial subtasks in one episode

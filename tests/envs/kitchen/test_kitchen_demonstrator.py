@@ -92,10 +92,10 @@ def test_inverse_kinematics_reaches_a_reachable_pose_without_touching_the_simula
 def test_demonstrator_bars_full():
     for name in SUBTASK_NAMES:
         assert _success([name], range(1000, 1030)).mean() >= 0.9, name
-    solved = np.concatenate([_success(list(c), range(2000 + 10 * i, 2004 + 10 * i)) for i, c in enumerate(COMBINATIONS)])
+    solved = np.concatenate(
+        [_success(list(c), range(2000 + 10 * i, 2004 + 10 * i)) for i, c in enumerate(COMBINATIONS)]
+    )
     assert solved.all(axis=1).mean() >= 0.8
-
-
 
 
 @pytest.mark.parametrize("retries", [0, 1])

@@ -176,8 +176,10 @@ def test_frame_stack():
 def test_fast_render_keeps_physics_and_objects_visible():
     fast, stock = km.build_model(), km.stock_model()
     for field in ("body_mass", "body_inertia", "body_ipos", "dof_damping", "actuator_gainprm", "opt_timestep"):
-        np.testing.assert_array_equal(getattr(fast, field, None) if field != "opt_timestep" else fast.opt.timestep,
-                                      getattr(stock, field, None) if field != "opt_timestep" else stock.opt.timestep)
+        np.testing.assert_array_equal(
+            getattr(fast, field, None) if field != "opt_timestep" else fast.opt.timestep,
+            getattr(stock, field, None) if field != "opt_timestep" else stock.opt.timestep,
+        )
     colliding = (fast.geom_contype | fast.geom_conaffinity) > 0
     np.testing.assert_array_equal(fast.geom_size[colliding], stock.geom_size[colliding])
     np.testing.assert_array_equal(fast.geom_pos[colliding], stock.geom_pos[colliding])
@@ -187,8 +189,15 @@ def test_fast_render_keeps_physics_and_objects_visible():
     before = {s: env.render_cameras(s)["overview"].astype(int) for s in (64, 128)}
     # every object that a subtask moves changes the overview image when it moves (the knobs are
     # small: a few pixels at 64x64)
-    need = {"microwave": 40, "kettle": 20, "slide cabinet": 20, "hinge cabinet": 40, "light switch": 2,
-            "bottom burner": 2, "top burner": 2}
+    need = {
+        "microwave": 40,
+        "kettle": 20,
+        "slide cabinet": 20,
+        "hinge cabinet": 40,
+        "light switch": 2,
+        "bottom burner": 2,
+        "top burner": 2,
+    }
     for name, n in need.items():
         env.reset(seed=0)
         _set_goal(env, name)
@@ -200,7 +209,12 @@ def test_fast_render_keeps_physics_and_objects_visible():
 
 
 def test_render_benchmark_runs():
-    out = subprocess.run([sys.executable, str(ROOT / "bench" / "kitchen_render.py"), "--frames", "5",
-                          "--stock-frames", "1"], capture_output=True, text=True, timeout=120, cwd=ROOT)
+    out = subprocess.run(
+        [sys.executable, str(ROOT / "bench" / "kitchen_render.py"), "--frames", "5", "--stock-frames", "1"],
+        capture_output=True,
+        text=True,
+        timeout=120,
+        cwd=ROOT,
+    )
     assert out.returncode == 0, out.stderr
     assert "overview" in out.stdout and "stock" in out.stdout

@@ -45,8 +45,14 @@ def scripted():
         ep = gen.episode(i, np.random.default_rng([0, i]))
         states = ep.arrays["states"]
         nq = km.NUM_ROBOT_QPOS + km.NUM_OBJECT_QPOS
-        out.append((qpos_of_states(states, nq), states[:, 1 + nq : 1 + nq + nq - 1], ep.arrays["actions"],
-                    ep.arrays["infos/completed"]))
+        out.append(
+            (
+                qpos_of_states(states, nq),
+                states[:, 1 + nq : 1 + nq + nq - 1],
+                ep.arrays["actions"],
+                ep.arrays["infos/completed"],
+            )
+        )
     return out
 
 
@@ -73,26 +79,39 @@ def write_minari(root, episodes, noise=1e-3, dataset_id="D4RL/kitchen/mixed-v2",
             # gymnasium-robotics adds uniform noise to the observation (not to achieved_goal)
             noisy = qpos + rng.uniform(-noise, noise, qpos.shape)
             g["observations/observation"] = np.concatenate(
-                [noisy[:, :9], qvel[:, :9], noisy[:, 9:], qvel[:, 9:]], axis=1)
+                [noisy[:, :9], qvel[:, :9], noisy[:, 9:], qvel[:, 9:]], axis=1
+            )
             for t in FILE_TASKS:
-                goal = np.array(SUBTASKS[t].goal) + (desired_shift if desired_shift and e == 0 and t == "microwave"
-                                                      else 0.0)
+                goal = np.array(SUBTASKS[t].goal) + (
+                    desired_shift if desired_shift and e == 0 and t == "microwave" else 0.0
+                )
                 g[f"observations/achieved_goal/{t}"] = qpos[:, idx[t]]
                 g[f"observations/desired_goal/{t}"] = np.tile(goal, (len(qpos), 1))
             g["actions"] = actions
-            done = np.stack([np.linalg.norm(qpos[1:, idx[t]] - SUBTASKS[t].goal, axis=-1) < THRESHOLD
-                             for t in FILE_TASKS], axis=1)
+            done = np.stack(
+                [np.linalg.norm(qpos[1:, idx[t]] - SUBTASKS[t].goal, axis=-1) < THRESHOLD for t in FILE_TASKS], axis=1
+            )
             g["rewards"] = done.sum(axis=1).astype(np.float64)
             g["terminations"] = np.zeros(len(actions), bool)
             g["truncations"] = np.eye(1, len(actions), len(actions) - 1, dtype=bool)[0]
             g["infos/ctrl"] = np.zeros((len(qpos), 9))  # create_franka_dataset.py's step callback
     boxes = {t: gym.spaces.Box(-np.inf, np.inf, (len(idx[t]),), np.float64) for t in FILE_TASKS}
-    obs_space = gym.spaces.Dict({"achieved_goal": gym.spaces.Dict(boxes), "desired_goal": gym.spaces.Dict(boxes),
-                                 "observation": gym.spaces.Box(-np.inf, np.inf, (59,), np.float64)})
-    meta = {"dataset_id": dataset_id, "total_episodes": len(episodes), "data_format": "hdf5",
-            "total_steps": int(sum(len(a) for _, _, a, _ in episodes)), "minari_version": "0.5.0",
-            "observation_space": serialize_space(obs_space),
-            "action_space": serialize_space(gym.spaces.Box(-1.0, 1.0, (9,), np.float32))}
+    obs_space = gym.spaces.Dict(
+        {
+            "achieved_goal": gym.spaces.Dict(boxes),
+            "desired_goal": gym.spaces.Dict(boxes),
+            "observation": gym.spaces.Box(-np.inf, np.inf, (59,), np.float64),
+        }
+    )
+    meta = {
+        "dataset_id": dataset_id,
+        "total_episodes": len(episodes),
+        "data_format": "hdf5",
+        "total_steps": int(sum(len(a) for _, _, a, _ in episodes)),
+        "minari_version": "0.5.0",
+        "observation_space": serialize_space(obs_space),
+        "action_space": serialize_space(gym.spaces.Box(-1.0, 1.0, (9,), np.float32)),
+    }
     (data / "metadata.json").write_text(json.dumps(meta))
     return root / dataset_id
 
@@ -139,7 +158,7 @@ def test_import_a_minari_dataset_found_through_minari_datasets_path(tmp_path, mo
     assert ds.num_episodes == 2 and list(ds.episode_lengths) == [len(a) for _, _, a, _ in scripted]
     states = np.asarray(ds.arrays["states"])
     starts = np.r_[0, np.cumsum(ds.episode_lengths + 1)]
-    for e, (qpos, qvel, actions, completed) in enumerate(scripted):
+    for e, (qpos, qvel, _actions, _completed) in enumerate(scripted):
         s = states[starts[e] : starts[e + 1]]
         # the target subtasks' joints come from the noise-free achieved_goal, the rest from the noisy observation
         exact = np.concatenate([_indices()[t] for t in FILE_TASKS])
@@ -167,8 +186,9 @@ def test_import_a_d4rl_file_then_train_bc_through_d5rl_train(tmp_path, scripted)
     assert main(["import-kitchen-human", str(path), "--no-render", "--no-progress"]) == 0
     ds = load_dataset(TASK, progress=False)
     assert ds.num_episodes == 2
-    np.testing.assert_allclose(qpos_of_states(ds.arrays["states"], 30),
-                               np.concatenate([q for q, *_ in scripted]).astype(np.float32), atol=0)
+    np.testing.assert_allclose(
+        qpos_of_states(ds.arrays["states"], 30), np.concatenate([q for q, *_ in scripted]).astype(np.float32), atol=0
+    )
     assert not np.asarray(ds.arrays["states"])[:, 31:60].any()  # D4RL stores no velocities
     np.testing.assert_array_equal(ds.arrays["infos/completed"], np.concatenate([c for *_, c in scripted]))
     _train_bc(tmp_path)
@@ -178,14 +198,32 @@ def test_verify_render_and_seeds_on_imported_data(tmp_path, scripted, capsys):
     from d5rl.datasets.generation import dataset_root
     from tests.test_bad_input import one_line_error
 
-    assert main(["import-kitchen-human", str(write_d4rl(tmp_path / "k.hdf5", scripted)), "--no-render",
-                 "--no-progress"]) == 0
+    assert (
+        main(["import-kitchen-human", str(write_d4rl(tmp_path / "k.hdf5", scripted)), "--no-render", "--no-progress"])
+        == 0
+    )
     assert main(["verify", TASK]) == 0
     video = tmp_path / "ep.gif"
-    assert main(["render", "kitchen-standard-mixed-human-v0", "--episode", "1", "--steps", "2", "--out", str(video),
-                 "--no-progress"]) == 0 and video.stat().st_size > 0
-    one_line_error(capsys, ["render", TASK, "--episode", "2", "--out", str(video)], "has no episode 2",
-                   "numbered 0 to 1")
+    assert (
+        main(
+            [
+                "render",
+                "kitchen-standard-mixed-human-v0",
+                "--episode",
+                "1",
+                "--steps",
+                "2",
+                "--out",
+                str(video),
+                "--no-progress",
+            ]
+        )
+        == 0
+        and video.stat().st_size > 0
+    )
+    one_line_error(
+        capsys, ["render", TASK, "--episode", "2", "--out", str(video)], "has no episode 2", "numbered 0 to 1"
+    )
     with pytest.raises(D5RLError, match="imported and has no seed"):
         load_dataset(TASK, seed=3)
     shard = next((dataset_root(d5rl.get_spec(TASK).dataset) / "shards").iterdir())
@@ -200,9 +238,33 @@ def test_verify_render_and_seeds_on_imported_data(tmp_path, scripted, capsys):
 
 def _train_bc(tmp_path):
     run = tmp_path / "run"
-    assert main(["train", "bc", TASK, "--offline-steps", "16", "--run-dir", str(run), "--no-progress",
-                 "--set", "hidden_dims=16,16", "--set", "batch_size=8", "--set", "eval_episodes=1",
-                 "--set", "eval_envs=1", "--set", "tensorboard=false", "--set", "checkpoint_interval=16"]) == 0
+    assert (
+        main(
+            [
+                "train",
+                "bc",
+                TASK,
+                "--offline-steps",
+                "16",
+                "--run-dir",
+                str(run),
+                "--no-progress",
+                "--set",
+                "hidden_dims=16,16",
+                "--set",
+                "batch_size=8",
+                "--set",
+                "eval_episodes=1",
+                "--set",
+                "eval_envs=1",
+                "--set",
+                "tensorboard=false",
+                "--set",
+                "checkpoint_interval=16",
+            ]
+        )
+        == 0
+    )
     config = json.loads((run / "config.json").read_text())
     assert config["dataset"]["dataset"] == "kitchen-standard-human"
     assert (run / "checkpoint").exists() or any(run.glob("checkpoint*"))
@@ -220,8 +282,17 @@ def test_action_check_measures_whether_the_actions_move_our_robot(tmp_path, scri
     """Noise-free positions and velocities with the scripted actions: one env step from each stored state lands
     on the next one; with the actions negated it misses by about two steps' motion."""
     flipped = [(q, v, sign * a, c) for q, v, a, c in scripted]
-    assert main(["import-kitchen-human", str(write_minari(tmp_path / "m", flipped, noise=0.0)), "--no-render",
-                 "--no-progress"]) == 0
+    assert (
+        main(
+            [
+                "import-kitchen-human",
+                str(write_minari(tmp_path / "m", flipped, noise=0.0)),
+                "--no-render",
+                "--no-progress",
+            ]
+        )
+        == 0
+    )
     manifest = json.loads((tmp_path / "d5rl-home/datasets/kitchen-standard-human/v1-seed0/manifest.json").read_text())
     check = manifest["replay_check"]["actions"]
     assert check["transitions"] == sum(len(range(0, len(a), 10)) for _, _, a, _ in scripted)
@@ -261,11 +332,16 @@ def test_missing_import_names_the_commands(tmp_path, capsys):
     assert "d5rl import-kitchen-human D4RL/kitchen/mixed-v2" in e.value.hint
     from tests.test_bad_input import one_line_error
 
-    one_line_error(capsys, ["train", "bc", TASK, "--offline-steps", "8", "--run-dir", str(tmp_path / "r")],
-                   "minari download D4RL/kitchen/mixed-v2", "d5rl import-kitchen-human")
+    one_line_error(
+        capsys,
+        ["train", "bc", TASK, "--offline-steps", "8", "--run-dir", str(tmp_path / "r")],
+        "minari download D4RL/kitchen/mixed-v2",
+        "d5rl import-kitchen-human",
+    )
     one_line_error(capsys, ["generate", TASK], "is imported, not generated", "d5rl import-kitchen-human")
-    one_line_error(capsys, ["import-kitchen-human", "D4RL/kitchen/nothing-v2"], "no kitchen dataset at",
-                   "minari download")
+    one_line_error(
+        capsys, ["import-kitchen-human", "D4RL/kitchen/nothing-v2"], "no kitchen dataset at", "minari download"
+    )
 
 
 def test_human_tasks_are_variants_of_the_standard_tasks():
@@ -277,7 +353,11 @@ def test_human_tasks_are_variants_of_the_standard_tasks():
     spec, base = d5rl.get_spec(TASK), d5rl.get_spec("kitchen-standard-mixed-state-v0")
     assert base_task(TASK) == base.id and spec.variant == "human"
     assert (spec.env_kwargs, spec.relabel, spec.group, spec.observation) == (
-        base.env_kwargs, base.relabel, base.group, base.observation)
+        base.env_kwargs,
+        base.relabel,
+        base.group,
+        base.observation,
+    )
     assert spec.dataset.imported and spec.dataset.name == "kitchen-standard-human"
     assert paper_task(TASK) == "kitchen-standard-mixed-v0"  # the paper trained on these data
     # a group stands for the scripted-data tasks; the human ones when named
@@ -297,8 +377,12 @@ def test_comparison_statistics_of_the_imported_data(tmp_path, monkeypatch, scrip
     assert summary["status"] == "ready" and summary["dataset"]["episodes"] == 2
     s = comparison_stats(TASK)
     lengths = [len(a) for _, _, a, _ in scripted]
-    assert (s["episodes"], s["transitions"], s["length_min"], s["length_max"]) == (2, sum(lengths), min(lengths),
-                                                                                    max(lengths))
+    assert (s["episodes"], s["transitions"], s["length_min"], s["length_max"]) == (
+        2,
+        sum(lengths),
+        min(lengths),
+        max(lengths),
+    )
     # orders: each subtask by the first step its column is true, computed here per subtask
     orders = []
     for *_, completed in scripted:

@@ -54,7 +54,9 @@ def test_play_never_contains_partial_set_and_sizes_are_uniform():
 
 
 def test_skilled_solves_more_than_novice(gen):
-    skilled = [gen.demonstrate(rd.MIXED_ORDER, rd.SKILLED, np.random.default_rng(i)).meta["num_solved"] for i in range(6)]
+    skilled = [
+        gen.demonstrate(rd.MIXED_ORDER, rd.SKILLED, np.random.default_rng(i)).meta["num_solved"] for i in range(6)
+    ]
     novice = [gen.demonstrate(rd.MIXED_ORDER, rd.NOVICE, np.random.default_rng(i)).meta["num_solved"] for i in range(6)]
     assert np.mean(skilled) >= 3.0, skilled  # every sampled variant is solvable by the skilled operator
     assert np.mean(skilled) > np.mean(novice), (skilled, novice)
@@ -127,11 +129,17 @@ def test_each_microwave_model_has_its_own_handle_and_opens(model):
     radius, length = MICROWAVES[model].handle_size
     assert variant.site("microhandle_site").pos[0] == pytest.approx(x)
     door = variant.body("microdoorroot").id
-    bars = [g for g in range(variant.ngeom) if variant.geom_bodyid[g] == door
-            and variant.geom_type[g] == mujoco.mjtGeom.mjGEOM_CAPSULE and variant.geom_size[g][1] == length]
+    bars = [
+        g
+        for g in range(variant.ngeom)
+        if variant.geom_bodyid[g] == door
+        and variant.geom_type[g] == mujoco.mjtGeom.mjGEOM_CAPSULE
+        and variant.geom_size[g][1] == length
+    ]
     assert len(bars) == 2 and sum(bool(variant.geom_conaffinity[g]) for g in bars) == 1  # drawn + colliding
-    assert all(variant.geom_size[g][0] == pytest.approx(radius) and variant.geom_pos[g][2] == pytest.approx(h)
-               for g in bars)
+    assert all(
+        variant.geom_size[g][0] == pytest.approx(radius) and variant.geom_pos[g][2] == pytest.approx(h) for g in bars
+    )
     assert not np.allclose(stock.site("microhandle_site").pos, variant.site("microhandle_site").pos)
     rng = np.random.default_rng(20 + model)
     env = RandomizedKitchenEnv(obs_mode="state", domain=dataclasses.replace(Domain.sample(rng), microwave=model))

@@ -87,8 +87,11 @@ def test_every_object_model_has_its_own_collision_geometry_and_mass():
 
     def colliding(model, body):
         b = model.body(body).id
-        rows = [(int(model.geom_type[g]), *np.round(model.geom_size[g], 4), *np.round(model.geom_pos[g], 4))
-                for g in range(model.ngeom) if model.geom_bodyid[g] == b and model.geom_conaffinity[g]]
+        rows = [
+            (int(model.geom_type[g]), *np.round(model.geom_size[g], 4), *np.round(model.geom_pos[g], 4))
+            for g in range(model.ngeom)
+            if model.geom_bodyid[g] == b and model.geom_conaffinity[g]
+        ]
         return sorted(rows), round(float(model.body_mass[b]), 4)
 
     kettles = [colliding(compiled_variant(0, k), "kettleroot") for k in range(objects.NUM_KETTLES)]
@@ -109,8 +112,13 @@ def test_every_object_model_has_its_own_collision_geometry_and_mass():
         d = mujoco.MjData(m)
         mujoco.mj_forward(m, d)
         site = d.site_xpos[m.site("kettle_site").id]
-        handle = [g for g in range(m.ngeom) if m.geom_bodyid[g] == m.body("kettleroot").id and m.geom_conaffinity[g]
-                  and m.geom_type[g] == mujoco.mjtGeom.mjGEOM_CAPSULE]
+        handle = [
+            g
+            for g in range(m.ngeom)
+            if m.geom_bodyid[g] == m.body("kettleroot").id
+            and m.geom_conaffinity[g]
+            and m.geom_type[g] == mujoco.mjtGeom.mjGEOM_CAPSULE
+        ]
         assert min(np.linalg.norm(d.geom_xpos[g] - site) for g in handle) < 1e-9, k
 
 
@@ -186,8 +194,9 @@ def test_render_cache_frames_do_not_depend_on_the_episode_order(monkeypatch):
 
     def render(order):
         monkeypatch.setattr(rd, "_RENDER_ENV", {})
-        return {s: rd.render_episode({"states": episodes[s][1][None]}, {"domain": episodes[s][0]}, size=32)
-                for s in order}
+        return {
+            s: rd.render_episode({"states": episodes[s][1][None]}, {"domain": episodes[s][0]}, size=32) for s in order
+        }
 
     a, b = render((0, 7)), render((7, 0))
     for s in (0, 7):

@@ -10,11 +10,10 @@ import numpy as np
 import pytest
 
 import d5rl
-from d5rl.envs.widowx import controller, scripted
-from d5rl.envs.widowx import model as wm
+from d5rl.envs.widowx import controller, scripted, tabletop
 from d5rl.envs.widowx import domain as wdom
+from d5rl.envs.widowx import model as wm
 from d5rl.envs.widowx import scene as wscene
-from d5rl.envs.widowx import tabletop
 from d5rl.envs.widowx.data import WidowXScriptedGenerator, render_states
 from d5rl.envs.widowx.task import WidowXSortingEnv
 from d5rl.errors import MissingAssetError
@@ -95,8 +94,10 @@ def test_ik_matches_simulator():
 def _table_contact(env, name) -> bool:
     table = env.model.geom("table").id
     geoms = env.index.obj_geoms[name]
-    return any((c.geom1 == table and c.geom2 in geoms) or (c.geom2 == table and c.geom1 in geoms)
-               for c in env.data.contact[: env.data.ncon])
+    return any(
+        (c.geom1 == table and c.geom2 in geoms) or (c.geom2 == table and c.geom1 in geoms)
+        for c in env.data.contact[: env.data.ncon]
+    )
 
 
 def test_objects_start_in_any_orientation_and_at_rest(env):
@@ -136,8 +137,9 @@ def test_unsettled_drop_is_caught(env, monkeypatch):
 # --- grasping and bins -----------------------------------------------------------------
 @pytest.mark.parametrize("name", wm.POOL)
 def test_grasp_and_lift_each_object(env, name):
-    dom = _domain(shoe=name if wm.CATEGORY[name] == "shoe" else "sneaker",
-                  toy=name if wm.CATEGORY[name] == "toy" else "duck")
+    dom = _domain(
+        shoe=name if wm.CATEGORY[name] == "shoe" else "sneaker", toy=name if wm.CATEGORY[name] == "toy" else "duck"
+    )
     lifted = 0
     for seed in range(2):
         env.reset(seed=seed, options={"domain": dom, "upright": True})  # the grip itself, from a standing pose
@@ -188,8 +190,9 @@ def test_object_on_table_does_not_count(env):
     assert r == 0.0 and info["shoe_bin"] is None
     assert not any(info["episode_stats"].values())  # on the table, never higher than 3 cm
     _, info = env.reset(seed=1, options={"domain": _domain()})
-    assert set(info["episode_stats"]) == {f"{o}/{k}" for o in ("shoe", "toy")
-                                          for k in ("lifted", "in_its_bin", "in_other_bin")}
+    assert set(info["episode_stats"]) == {
+        f"{o}/{k}" for o in ("shoe", "toy") for k in ("lifted", "in_its_bin", "in_other_bin")
+    }
     assert not any(info["episode_stats"].values())
 
 
@@ -222,7 +225,7 @@ def test_scripted_grasp_success_band():
 
 
 def test_sorting_plans():
-    """"one" attempts the first object only; "miss" closes the gripper above one object, which stays put."""
+    """ "one" attempts the first object only; "miss" closes the gripper above one object, which stays put."""
     one = WidowXScriptedGenerator(mode="sorting", p_wrong=0.0, p_one=1.0).episode(0, np.random.default_rng([5, 0]))
     assert one.meta["plan"] == "one" and len(one.meta["objects"]) == 1 and one.meta["num_sorted"] <= 1
     miss = WidowXScriptedGenerator(mode="sorting", p_wrong=0.0, p_miss=1.0).episode(0, np.random.default_rng([5, 0]))
@@ -337,10 +340,17 @@ def test_each_varied_factor_changes_the_image(env):
     base = _domain()
     ref = env.render_side().astype(int)
     changes = {
-        "table_texture": "marble1", "wall_texture": "marble1",
-        "table_rgb": (0.7, 0.5, 0.4), "wall_rgb": (0.5, 0.6, 0.9), "key_light_pos": (0.0, 0.3, 1.0),
-        "key_light_rgb": (0.9, 0.7, 0.5), "fill_light_rgb": (0.05, 0.05, 0.05), "ambient": 0.1,
-        "camera_pos": (0.82, 0.03, 0.53), "camera_lookat": (0.25, 0.02, 0.0), "camera_fovy": 47.0,
+        "table_texture": "marble1",
+        "wall_texture": "marble1",
+        "table_rgb": (0.7, 0.5, 0.4),
+        "wall_rgb": (0.5, 0.6, 0.9),
+        "key_light_pos": (0.0, 0.3, 1.0),
+        "key_light_rgb": (0.9, 0.7, 0.5),
+        "fill_light_rgb": (0.05, 0.05, 0.05),
+        "ambient": 0.1,
+        "camera_pos": (0.82, 0.03, 0.53),
+        "camera_lookat": (0.25, 0.02, 0.0),
+        "camera_fovy": 47.0,
     }
     for field, value in changes.items():
         env.set_domain(wdom.Domain.from_json({**base.to_json(), field: value}))
@@ -397,8 +407,8 @@ def test_generate_and_load_round_trip():
     pix = ds.arrays["observations/pixels/side"]
     assert pix.shape == (3 * 61, 128, 128, 3) and pix.dtype == np.uint8
     first_of_ep2 = 61
-    frames = render_states(ds.arrays["states"][first_of_ep2:first_of_ep2 + 2], ds.episode_meta[1])
-    np.testing.assert_array_equal(frames, pix[first_of_ep2:first_of_ep2 + 2])
+    frames = render_states(ds.arrays["states"][first_of_ep2 : first_of_ep2 + 2], ds.episode_meta[1])
+    np.testing.assert_array_equal(frames, pix[first_of_ep2 : first_of_ep2 + 2])
     batch = ds.sample(4, np.random.default_rng(0))
     assert batch["observations"]["pixels/side"].shape == (4, 128, 128, 3)
     small = load_dataset("wx-sorting-pickplacedata-v0", episodes=3, workers=1, progress=False, size=32)

@@ -19,7 +19,7 @@ that is not retried) and ``retries`` (how often a subtask the script did not fin
 from __future__ import annotations
 
 import dataclasses
-from typing import Sequence
+from collections.abc import Sequence
 
 import numpy as np
 
@@ -44,15 +44,23 @@ class Operator:
     def style(self, rng: np.random.Generator):
         from d5rl.envs.kitchen.demonstrator import Style
 
-        return Style(speed=float(rng.uniform(*self.speed)), noise=float(rng.uniform(*self.noise)),
-                     pause_prob=float(rng.uniform(*self.hesitation)), via_prob=float(rng.uniform(*self.detour)))
+        return Style(
+            speed=float(rng.uniform(*self.speed)),
+            noise=float(rng.uniform(*self.noise)),
+            pause_prob=float(rng.uniform(*self.hesitation)),
+            via_prob=float(rng.uniform(*self.detour)),
+        )
 
 
-SKILLED = Operator("skilled", speed=(1.0, 1.2), noise=(0.01, 0.03), hesitation=(0.0, 0.05), detour=(0.0, 0.1), give_up=0.0,
-                   retries=3)
-AVERAGE = Operator("average", speed=(0.8, 1.1), noise=(0.03, 0.08), hesitation=(0.05, 0.2), detour=(0.1, 0.3), give_up=0.04,
-                   retries=1)
-NOVICE = Operator("novice", speed=(0.6, 0.9), noise=(0.08, 0.15), hesitation=(0.15, 0.35), detour=(0.3, 0.6), give_up=0.06)
+SKILLED = Operator(
+    "skilled", speed=(1.0, 1.2), noise=(0.01, 0.03), hesitation=(0.0, 0.05), detour=(0.0, 0.1), give_up=0.0, retries=3
+)
+AVERAGE = Operator(
+    "average", speed=(0.8, 1.1), noise=(0.03, 0.08), hesitation=(0.05, 0.2), detour=(0.1, 0.3), give_up=0.04, retries=1
+)
+NOVICE = Operator(
+    "novice", speed=(0.6, 0.9), noise=(0.08, 0.15), hesitation=(0.15, 0.35), detour=(0.3, 0.6), give_up=0.06
+)
 OPERATORS = {o.name: o for o in (SKILLED, AVERAGE, NOVICE)}
 MIXED_ORDER = tuple(MIXED)
 MODES = {"demos": (SKILLED,), "play": (SKILLED, AVERAGE, NOVICE), "suboptimal": (AVERAGE, NOVICE)}
@@ -151,9 +159,19 @@ def render_episode(arrays: dict, meta: dict, cameras: Sequence[str] = CAMERAS, s
     return {f"observations/pixels/{c}": v for c, v in out.items()}
 
 
-def renders(spec, root, manifest, *, episodes: int, workers: int | None = None, progress: bool = True,
-            cameras: Sequence[str] = CAMERAS, size: int = 128, render: bool = True,
-            check: bool = False) -> list:
+def renders(
+    spec,
+    root,
+    manifest,
+    *,
+    episodes: int,
+    workers: int | None = None,
+    progress: bool = True,
+    cameras: Sequence[str] = CAMERAS,
+    size: int = 128,
+    render: bool = True,
+    check: bool = False,
+) -> list:
     """``DatasetSpec.derived``: camera frames of the stored states in their domains (cached); for a
     ``-state`` task, its state observations instead.  ``check=True`` only checks the arguments."""
     from d5rl.datasets.render_cache import check_render_args, ensure_render_cache
@@ -163,10 +181,28 @@ def renders(spec, root, manifest, *, episodes: int, workers: int | None = None, 
         return []
 
     if spec is not None and spec.observation == "state":
-        return [ensure_render_cache(root, manifest, "d5rl.envs.kitchen.data:state_episode", {},
-                                    name="state", episodes=episodes, workers=workers, progress=progress)]
+        return [
+            ensure_render_cache(
+                root,
+                manifest,
+                "d5rl.envs.kitchen.data:state_episode",
+                {},
+                name="state",
+                episodes=episodes,
+                workers=workers,
+                progress=progress,
+            )
+        ]
 
-    return [ensure_render_cache(root, manifest, "d5rl.envs.kitchen.randomized.data:render_episode",
-                                {"cameras": tuple(cameras), "size": int(size)},
-                                name=f"{'+'.join(cameras)}-{int(size)}x{int(size)}", episodes=episodes,
-                                workers=workers, progress=progress)]
+    return [
+        ensure_render_cache(
+            root,
+            manifest,
+            "d5rl.envs.kitchen.randomized.data:render_episode",
+            {"cameras": tuple(cameras), "size": int(size)},
+            name=f"{'+'.join(cameras)}-{int(size)}x{int(size)}",
+            episodes=episodes,
+            workers=workers,
+            progress=progress,
+        )
+    ]

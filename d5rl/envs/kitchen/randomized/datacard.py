@@ -23,8 +23,11 @@ from d5rl.envs.kitchen.randomized import objects
 from d5rl.envs.kitchen.randomized.data import MODES, SKILLED, RandomizedKitchenGenerator
 
 PAPER = {"demos": 4.0, "play": 3.62, "suboptimal": 3.55}
-DATASETS = {"demos": "kitchen-randomized-demos-v0", "play": "kitchen-randomized-mixed-v0",
-            "suboptimal": "kitchen-randomized-suboptimal-v0"}
+DATASETS = {
+    "demos": "kitchen-randomized-demos-v0",
+    "play": "kitchen-randomized-mixed-v0",
+    "suboptimal": "kitchen-randomized-suboptimal-v0",
+}
 
 
 def operator_solves(subtask: str, replace: dict, seed: int, steps: int = 250, before: tuple = ()) -> bool:
@@ -58,24 +61,31 @@ def _env():
 
 
 def grasp_table(seeds: int) -> list[str]:
-    rows = ["| object | model | handle (radius, half-length) m | mass kg | skilled operator, subtask alone |",
-            "|---|---|---|---|---|"]
+    rows = [
+        "| object | model | handle (radius, half-length) m | mass kg | skilled operator, subtask alone |",
+        "|---|---|---|---|---|",
+    ]
     for k, m in enumerate(objects.KETTLES):  # from each start site (the far one is the harder reach)
-        ok = [sum(operator_solves("kettle", {"kettle": k, "kettle_site": site}, s) for s in range(seeds))
-              for site in range(len(dm.KETTLE_SITES))]
+        ok = [
+            sum(operator_solves("kettle", {"kettle": k, "kettle_site": site}, s) for s in range(seeds))
+            for site in range(len(dm.KETTLE_SITES))
+        ]
         per_site = ", ".join(f"site {site}: {n} / {seeds}" for site, n in enumerate(ok))
         rows.append(f"| kettle | {k}: {m.name} | bar across the top {m.handle_size} | {m.mass} | {per_site} |")
     for k, m in enumerate(objects.MICROWAVES):
         ok = sum(operator_solves("microwave", {"microwave": k}, s) for s in range(seeds))
-        rows.append(f"| microwave | {k}: {m.name} | vertical bar {m.handle_size} | door {m.door_mass} | {ok} / {seeds} |")
+        rows.append(
+            f"| microwave | {k}: {m.name} | vertical bar {m.handle_size} | door {m.door_mass} | {ok} / {seeds} |"
+        )
     return rows
 
 
 def corners() -> dict[str, list[tuple[str, dict]]]:
     """The corners of each pose range, as Domain fields."""
     out = {"kettle": [], "microwave": []}
-    for site, x, y, yaw in itertools.product(range(len(dm.KETTLE_SITES)), dm.KETTLE_X, dm.KETTLE_Y,
-                                             (-dm.KETTLE_YAW, dm.KETTLE_YAW)):
+    for site, x, y, yaw in itertools.product(
+        range(len(dm.KETTLE_SITES)), dm.KETTLE_X, dm.KETTLE_Y, (-dm.KETTLE_YAW, dm.KETTLE_YAW)
+    ):
         label = f"site {site}, dx {x:+.2f}, dy {y:+.2f}, yaw {np.degrees(yaw):+.0f} deg"
         out["kettle"].append((label, {"kettle_site": site, "kettle_offset": (x, y), "kettle_yaw": yaw}))
     for x, y, yaw in itertools.product(dm.MICROWAVE_X, dm.MICROWAVE_Y, dm.MICROWAVE_YAW):
@@ -105,20 +115,29 @@ def sample_stats(mode: str, episodes: int, seed: int = 0) -> dict:
 def _stats(metas: list[dict]) -> dict:
     solved = np.array([m["num_solved"] for m in metas])
     asked = np.array([len(m["subtasks"]) for m in metas])
-    return {"episodes": len(metas), "objects_per_episode": float(solved.mean()), "objects_std": float(solved.std()),
-            "subtasks_asked": float(asked.mean()),
-            "all_solved": float(np.mean([set(m["subtasks"]) <= set(m["solved"]) for m in metas])),
-            "operators": {o: sum(m["operator"] == o for m in metas) for o in sorted({m["operator"] for m in metas})}}
+    return {
+        "episodes": len(metas),
+        "objects_per_episode": float(solved.mean()),
+        "objects_std": float(solved.std()),
+        "subtasks_asked": float(asked.mean()),
+        "all_solved": float(np.mean([set(m["subtasks"]) <= set(m["solved"]) for m in metas])),
+        "operators": {o: sum(m["operator"] == o for m in metas) for o in sorted({m["operator"] for m in metas})},
+    }
 
 
 def stats_table(stats: dict[str, dict]) -> list[str]:
-    rows = ["| dataset | episodes | objects/episode (ours) | paper | difference | subtasks asked | all asked solved "
-            "| operators |", "|---|---|---|---|---|---|---|---|"]
+    rows = [
+        "| dataset | episodes | objects/episode (ours) | paper | difference | subtasks asked | all asked solved "
+        "| operators |",
+        "|---|---|---|---|---|---|---|---|",
+    ]
     for name, s in stats.items():
         mode = name.split()[0]
-        rows.append(f"| {name} | {s['episodes']} | {s['objects_per_episode']:.2f} ± {s['objects_std']:.2f} | "
-                    f"{PAPER[mode]} | {s['objects_per_episode'] - PAPER[mode]:+.2f} | {s['subtasks_asked']:.2f} | "
-                    f"{100 * s['all_solved']:.1f}% | {s['operators']} |")
+        rows.append(
+            f"| {name} | {s['episodes']} | {s['objects_per_episode']:.2f} ± {s['objects_std']:.2f} | "
+            f"{PAPER[mode]} | {s['objects_per_episode'] - PAPER[mode]:+.2f} | {s['subtasks_asked']:.2f} | "
+            f"{100 * s['all_solved']:.1f}% | {s['operators']} |"
+        )
     return rows
 
 
@@ -160,7 +179,7 @@ def domain_grid(path: str, n: int = 8, seed: int = 0, size: int = 128) -> None:
     for i in range(n):
         obs, _ = env.reset(seed=seed + i)
         rows.append(np.concatenate([obs[f"pixels/{c}"] for c in ("left", "right", "wrist")], axis=1))
-    grid = np.concatenate([np.concatenate(rows[: n // 2], axis=0), np.concatenate(rows[n // 2:], axis=0)], axis=1)
+    grid = np.concatenate([np.concatenate(rows[: n // 2], axis=0), np.concatenate(rows[n // 2 :], axis=0)], axis=1)
     iio.imwrite(path, grid, extension=".png", optimize=True)
 
 

@@ -26,7 +26,6 @@ videos; physics is identical, only the pictures change.
 from __future__ import annotations
 
 import dataclasses
-import functools
 
 import mujoco
 import numpy as np
@@ -106,8 +105,12 @@ class Domain:
     kettle_site: int = 0  # index into KETTLE_SITES
 
     @classmethod
-    def sample(cls, rng: np.random.Generator) -> "Domain":
-        mw, kt, nl = int(rng.integers(NUM_MICROWAVES)), int(rng.integers(NUM_KETTLES)), int(rng.integers(1, MAX_EXTRA_LIGHTS + 1))
+    def sample(cls, rng: np.random.Generator) -> Domain:
+        mw, kt, nl = (
+            int(rng.integers(NUM_MICROWAVES)),
+            int(rng.integers(NUM_KETTLES)),
+            int(rng.integers(1, MAX_EXTRA_LIGHTS + 1)),
+        )
         skins = tuple(SKINS[g][int(rng.integers(len(SKINS[g])))] for g in SURFACES)
         colors = tuple(_tint(rng, skin) for skin in skins)
         lights = []
@@ -117,13 +120,21 @@ class Domain:
             d /= np.linalg.norm(d)
             lights.append((tuple(float(x) for x in d), tuple(float(x) for x in rng.uniform(0.2, 0.6, 3))))
         camera = tuple(
-            (tuple(float(x) for x in rng.normal(0, 0.05, 3)), float(rng.normal(0, 0.05)),
-             float(rng.normal(0, 1.0)), float(rng.normal(0, 1.0)))
+            (
+                tuple(float(x) for x in rng.normal(0, 0.05, 3)),
+                float(rng.normal(0, 0.05)),
+                float(rng.normal(0, 1.0)),
+                float(rng.normal(0, 1.0)),
+            )
             for _ in CAMERA_NAMES
         )
         site = int(rng.integers(len(KETTLE_SITES)))
         offset = (float(rng.uniform(*KETTLE_X)), float(rng.uniform(*KETTLE_Y)))
-        mw_pose = (float(rng.uniform(*MICROWAVE_X)), float(rng.uniform(*MICROWAVE_Y)), float(rng.uniform(*MICROWAVE_YAW)))
+        mw_pose = (
+            float(rng.uniform(*MICROWAVE_X)),
+            float(rng.uniform(*MICROWAVE_Y)),
+            float(rng.uniform(*MICROWAVE_YAW)),
+        )
         kettle_yaw = float(rng.uniform(-KETTLE_YAW, KETTLE_YAW))
         return cls(mw, kt, nl, colors, tuple(lights), camera, offset, mw_pose, skins, kettle_yaw, site)
 
@@ -131,21 +142,26 @@ class Domain:
         return dataclasses.asdict(self)
 
     @classmethod
-    def from_json(cls, d: dict) -> "Domain":
+    def from_json(cls, d: dict) -> Domain:
         from d5rl.errors import D5RLError
 
         def tup(x):
             return tuple(tup(v) for v in x) if isinstance(x, (list, tuple)) else x
 
-        stale = D5RLError("this domain was recorded by an older version of the randomized kitchen "
-                          "(other surface groups, textures or object models)",
-                          "regenerate the dataset with `d5rl generate` (its generator version is stale)")
+        stale = D5RLError(
+            "this domain was recorded by an older version of the randomized kitchen "
+            "(other surface groups, textures or object models)",
+            "regenerate the dataset with `d5rl generate` (its generator version is stale)",
+        )
         try:
             domain = cls(**{k: tup(v) for k, v in d.items()})
         except TypeError:
             raise stale from None
-        if (len(domain.colors) != len(SURFACES) or len(domain.textures) != len(SURFACES)
-                or any(s not in SKINS[g] for g, s in zip(SURFACES, domain.textures))):
+        if (
+            len(domain.colors) != len(SURFACES)
+            or len(domain.textures) != len(SURFACES)
+            or any(s not in SKINS[g] for g, s in zip(SURFACES, domain.textures))
+        ):
             raise stale
         return domain
 
@@ -158,8 +174,9 @@ class Domain:
 def _add_extra_lights(spec: mujoco.MjSpec, n: int, shadows: bool) -> None:
     # all of them in every variant; a domain switches off those it does not use (``light_active``)
     for i in range(n):
-        spec.worldbody.add_light(name=f"rand_light{i}", pos=(0, 0.5, 4.0), dir=(0, 0, -1), castshadow=shadows,
-                                 diffuse=(0.3, 0.3, 0.3))
+        spec.worldbody.add_light(
+            name=f"rand_light{i}", pos=(0, 0.5, 4.0), dir=(0, 0, -1), castshadow=shadows, diffuse=(0.3, 0.3, 0.3)
+        )
 
 
 def _add_side_cameras(spec: mujoco.MjSpec) -> None:
@@ -193,9 +210,13 @@ def _base_arrays(microwave: int, kettle: int, quality: str, model: mujoco.MjMode
     if key not in _BASE:
         m = model if model is not None else compiled_variant(microwave, kettle, quality)
         mw = m.body("microroot").id
-        _BASE[key] = {"mat_rgba": m.mat_rgba.copy(), "mat_texid": m.mat_texid.copy(),
-                      "mat_texrepeat": m.mat_texrepeat.copy(), "microwave_pos": m.body_pos[mw].copy(),
-                      "microwave_quat": m.body_quat[mw].copy()}
+        _BASE[key] = {
+            "mat_rgba": m.mat_rgba.copy(),
+            "mat_texid": m.mat_texid.copy(),
+            "mat_texrepeat": m.mat_texrepeat.copy(),
+            "microwave_pos": m.body_pos[mw].copy(),
+            "microwave_quat": m.body_quat[mw].copy(),
+        }
     return _BASE[key]
 
 
@@ -228,7 +249,8 @@ def apply_domain(model: mujoco.MjModel, domain: Domain, quality: str = "fast") -
             elif skin != "stock":
                 flat = name in FLAT
                 model.mat_texid[i, mujoco.mjtTextureRole.mjTEXROLE_RGB] = model.texture(
-                    textures.texture_name(skin, flat)).id
+                    textures.texture_name(skin, flat)
+                ).id
                 if flat:
                     model.mat_texrepeat[i] = FLOOR_REPEAT * int(skin.split("@")[1])
     for i in range(MAX_EXTRA_LIGHTS):
@@ -239,8 +261,9 @@ def apply_domain(model: mujoco.MjModel, domain: Domain, quality: str = "fast") -
         model.light_diffuse[lid] = diffuse
     for name, (dlook, ddist, daz, del_) in zip(CAMERA_NAMES, domain.camera):
         cam = SIDE_CAMERAS[name]
-        jit = km.LookAtCamera(tuple(np.add(cam.lookat, dlook)), cam.distance + ddist, cam.azimuth + daz,
-                              cam.elevation + del_, cam.fovy)
+        jit = km.LookAtCamera(
+            tuple(np.add(cam.lookat, dlook)), cam.distance + ddist, cam.azimuth + daz, cam.elevation + del_, cam.fovy
+        )
         pos, xyaxes = jit.pose()
         cid = model.camera(name).id
         model.cam_pos[cid] = pos

@@ -30,8 +30,12 @@ from d5rl.envs.kitchen.scripts import KettleGrasp, MicrowaveGrasp
 
 NUM_MICROWAVES = 4
 NUM_KETTLES = 8
-_CAPSULE, _BOX, _CYL, _ELLIPSOID = (mujoco.mjtGeom.mjGEOM_CAPSULE, mujoco.mjtGeom.mjGEOM_BOX,
-                                    mujoco.mjtGeom.mjGEOM_CYLINDER, mujoco.mjtGeom.mjGEOM_ELLIPSOID)
+_CAPSULE, _BOX, _CYL, _ELLIPSOID = (
+    mujoco.mjtGeom.mjGEOM_CAPSULE,
+    mujoco.mjtGeom.mjGEOM_BOX,
+    mujoco.mjtGeom.mjGEOM_CYLINDER,
+    mujoco.mjtGeom.mjGEOM_ELLIPSOID,
+)
 _X_AXIS = (0.7071068, 0.0, 0.7071068, 0.0)  # capsule/cylinder axis along x
 _Y_AXIS = (0.7071068, 0.7071068, 0.0, 0.0)  # along y
 
@@ -76,10 +80,12 @@ class MicrowaveModel:
 MICROWAVES = (
     MicrowaveModel("stock", None, 0.26, (0.475, 0.0), (0.02, 0.13), None),
     MicrowaveModel("long bar", (0.23, 0.2, 0.17), 0.35, (0.455, 0.0), (0.018, 0.17), (0.2, 0.2, 0.2, 1)),
-    MicrowaveModel("low thick bar", (0.26, 0.18, 0.19), 0.3, (0.445, -0.05), (0.024, 0.09),
-                   (0.8, 0.8, 0.8, 1), (0.1, 0.1, 0.1, 1)),
-    MicrowaveModel("stubby bar", (0.22, 0.21, 0.15), 0.4, (0.47, 0.0), (0.026, 0.07), (0.6, 0.1, 0.1, 1),
-                   (0.8, 0.7, 0.1, 1)),
+    MicrowaveModel(
+        "low thick bar", (0.26, 0.18, 0.19), 0.3, (0.445, -0.05), (0.024, 0.09), (0.8, 0.8, 0.8, 1), (0.1, 0.1, 0.1, 1)
+    ),
+    MicrowaveModel(
+        "stubby bar", (0.22, 0.21, 0.15), 0.4, (0.47, 0.0), (0.026, 0.07), (0.6, 0.1, 0.1, 1), (0.8, 0.7, 0.1, 1)
+    ),
 )
 
 
@@ -102,10 +108,28 @@ def microwave_grasp(k: int) -> MicrowaveGrasp:
 
 def _pair(body, kind, size, pos, rgba, quat=(1, 0, 0, 0), mass=None, name=None):
     """A visual geom and a colliding twin (the stock scene's convention: group 1 drawn, group 4 collides)."""
-    body.add_geom(type=kind, size=size, pos=pos, quat=quat, rgba=rgba, contype=0, conaffinity=0, group=1,
-                  name=None if name is None else name + "_visual")
-    col = body.add_geom(type=kind, size=size, pos=pos, quat=quat, rgba=(0.3, 0.3, 1.0, 0.5), contype=1,
-                        conaffinity=1, group=4, name=name)
+    body.add_geom(
+        type=kind,
+        size=size,
+        pos=pos,
+        quat=quat,
+        rgba=rgba,
+        contype=0,
+        conaffinity=0,
+        group=1,
+        name=None if name is None else name + "_visual",
+    )
+    col = body.add_geom(
+        type=kind,
+        size=size,
+        pos=pos,
+        quat=quat,
+        rgba=(0.3, 0.3, 1.0, 0.5),
+        contype=1,
+        conaffinity=1,
+        group=4,
+        name=name,
+    )
     if mass is not None:
         col.mass = mass
     return col
@@ -122,8 +146,15 @@ def add_kettle(spec: mujoco.MjSpec, k: int) -> None:
     kind, size, zc = m.body
     radius = size[0]
     top = zc + (size[1] if kind == _CYL else size[2])
-    _pair(body, kind, size, (0, 0, zc), m.rgba, mass=(0.75 if kind == _ELLIPSOID else 0.8) * m.mass,
-          name=f"kettle{k}_body")
+    _pair(
+        body,
+        kind,
+        size,
+        (0, 0, zc),
+        m.rgba,
+        mass=(0.75 if kind == _ELLIPSOID else 0.8) * m.mass,
+        name=f"kettle{k}_body",
+    )
     dark = (0.1, 0.1, 0.1, 1)
     if kind == _ELLIPSOID:
         _pair(body, _CYL, (0.08, 0.0075, 0), (0, 0, 0.0075), dark, mass=0.05 * m.mass)  # foot
@@ -147,16 +178,36 @@ def add_microwave(spec: mujoco.MjSpec, k: int) -> None:
     half = m.shell
     # the shell collides with the arm and the kettle (like the stock body's boxes: contype 0,
     # conaffinity 1); it keeps behind the door's plane so the door still swings open
-    body.add_geom(type=_BOX, size=half, pos=(0, 0.02, half[2] - 0.02), rgba=m.rgba, contype=0, conaffinity=0,
-                  group=1, name=f"mw_shell{k}")
-    body.add_geom(type=_BOX, size=(half[0], half[1] - 0.02, half[2]), pos=(0, 0.04, half[2] - 0.02),
-                  rgba=(0.3, 0.3, 1.0, 0.5), contype=0, conaffinity=1, group=4, name=f"mw_shell{k}_collision")
+    body.add_geom(
+        type=_BOX,
+        size=half,
+        pos=(0, 0.02, half[2] - 0.02),
+        rgba=m.rgba,
+        contype=0,
+        conaffinity=0,
+        group=1,
+        name=f"mw_shell{k}",
+    )
+    body.add_geom(
+        type=_BOX,
+        size=(half[0], half[1] - 0.02, half[2]),
+        pos=(0, 0.04, half[2] - 0.02),
+        rgba=(0.3, 0.3, 1.0, 0.5),
+        contype=0,
+        conaffinity=1,
+        group=4,
+        name=f"mw_shell{k}_collision",
+    )
     # the door's own mass: a plate of the stock door's size (its collision box) of this mass
     door.explicitinertial = True
     door.mass = m.door_mass
     door.ipos = (0.259, -0.026, 0.0)
     a, b, c = 0.518, 0.048, 0.37  # full extents of the door plate, m
-    door.inertia = (m.door_mass / 12 * (b * b + c * c), m.door_mass / 12 * (a * a + c * c), m.door_mass / 12 * (a * a + b * b))
+    door.inertia = (
+        m.door_mass / 12 * (b * b + c * c),
+        m.door_mass / 12 * (a * a + c * c),
+        m.door_mass / 12 * (a * a + b * b),
+    )
     stock_x = door.sites[0].pos[0]
     x, h = m.handle_pos
     r, half_len = m.handle_size
@@ -166,9 +217,25 @@ def add_microwave(spec: mujoco.MjSpec, k: int) -> None:
     y_bar, y_post = -0.108, -0.075  # the stock handle's distance from the door (bar, middle of stand-offs)
     ends = [(x, y_post, h + s * half_len) for s in (-1, 1)]
     for group, con, rgba in ((1, 0, m.handle_rgba), (4, 1, (0.3, 0.3, 1.0, 0.5))):
-        door.add_geom(type=_CAPSULE, size=(r, half_len, 0), pos=(x, y_bar, h), rgba=rgba, contype=0,
-                      conaffinity=con, group=group, name=f"mw{k}_handle" + ("" if con else "_visual"))
+        door.add_geom(
+            type=_CAPSULE,
+            size=(r, half_len, 0),
+            pos=(x, y_bar, h),
+            rgba=rgba,
+            contype=0,
+            conaffinity=con,
+            group=group,
+            name=f"mw{k}_handle" + ("" if con else "_visual"),
+        )
         for e in ends:
-            door.add_geom(type=_CAPSULE, size=(min(r, 0.02), 0.03, 0), pos=e, quat=_Y_AXIS, rgba=rgba, contype=0,
-                          conaffinity=con, group=group)
+            door.add_geom(
+                type=_CAPSULE,
+                size=(min(r, 0.02), 0.03, 0),
+                pos=e,
+                quat=_Y_AXIS,
+                rgba=rgba,
+                contype=0,
+                conaffinity=con,
+                group=group,
+            )
     door.sites[0].pos = (x, y_bar, 0.0)  # the bar's height is in the grasp plan's dz

@@ -38,13 +38,19 @@ Version history
 
 from __future__ import annotations
 
-from typing import Sequence
+from collections.abc import Sequence
 
 import mujoco
 import numpy as np
 
-from d5rl.envs.kitchen.randomized.domain import (QUALITIES, Domain, apply_domain, compiled_variant, grasp_plans,
-                                                 kettle_start_offset)
+from d5rl.envs.kitchen.randomized.domain import (
+    QUALITIES,
+    Domain,
+    apply_domain,
+    compiled_variant,
+    grasp_plans,
+    kettle_start_offset,
+)
 from d5rl.envs.kitchen.subtasks import MIXED
 from d5rl.envs.kitchen.task import KitchenEnv
 from d5rl.rendering import sync_materials
@@ -55,21 +61,42 @@ CAMERAS = ("left", "right", "wrist")
 class RandomizedKitchenEnv(KitchenEnv):
     """Randomized kitchen (see the module docstring)."""
 
-    def __init__(self, tasks: Sequence[str] = MIXED, obs_mode: str = "pixels", image_size: int = 128,
-                 cameras: Sequence[str] = CAMERAS, init_noise: float = 0.05, render_mode: str | None = None,
-                 render_size: tuple[int, int] = (240, 320), domain: Domain | None = None, quality: str = "fast",
-                 width: int | None = None, height: int | None = None):
+    def __init__(
+        self,
+        tasks: Sequence[str] = MIXED,
+        obs_mode: str = "pixels",
+        image_size: int = 128,
+        cameras: Sequence[str] = CAMERAS,
+        init_noise: float = 0.05,
+        render_mode: str | None = None,
+        render_size: tuple[int, int] = (240, 320),
+        domain: Domain | None = None,
+        quality: str = "fast",
+        width: int | None = None,
+        height: int | None = None,
+    ):
         from d5rl.errors import D5RLError
 
         if quality not in QUALITIES:
-            raise D5RLError(f"quality must be one of {QUALITIES}, got {quality!r}",
-                            "use 'fast' (datasets) or 'high' (shadows and reflections, for figures)")
+            raise D5RLError(
+                f"quality must be one of {QUALITIES}, got {quality!r}",
+                "use 'fast' (datasets) or 'high' (shadows and reflections, for figures)",
+            )
         self.quality = quality
         first = domain or Domain.sample(np.random.default_rng(0))
         model = compiled_variant(*first.key, quality)
-        super().__init__(tasks=tasks, obs_mode=obs_mode, image_size=image_size, cameras=cameras,
-                         init_noise=init_noise, render_mode=render_mode, render_size=render_size, model=model,
-                         width=width, height=height)
+        super().__init__(
+            tasks=tasks,
+            obs_mode=obs_mode,
+            image_size=image_size,
+            cameras=cameras,
+            init_noise=init_noise,
+            render_mode=render_mode,
+            render_size=render_size,
+            model=model,
+            width=width,
+            height=height,
+        )
         self._fixed_domain = domain
         self._variants: dict[tuple, tuple] = {}
         self.domain = first

@@ -38,7 +38,7 @@ def texture_name(skin: str, flat: bool = False) -> str:
     return f"rand_{'2d' if flat else 'cube'}_{photo}_{scale}"
 
 
-@functools.lru_cache(maxsize=None)
+@functools.cache
 def photo_image(photo: str, scale: int = 1, size: int = SIZE) -> np.ndarray:
     """uint8 (size, size, 3): the photo resized to ``size / scale`` and tiled ``scale`` x ``scale``."""
     from PIL import Image
