@@ -17,6 +17,7 @@ from pathlib import Path
 
 import numpy as np
 
+from d5rl.rollout import Step, rollout
 from d5rl.video import write_gif
 
 GIF_SIZE = (120, 160)  # (height, width) of the frames
@@ -35,25 +36,35 @@ def ranked_cells(results, task: str) -> list:
 
 
 def _episode(agent, env, task: str, seed: int, camera=None, every: int = EVERY):
-    """``(normalized score or return, frames)`` of one evaluation episode (frames only with a camera)."""
-    import jax
+    """``(normalized score or return, frames)`` of one evaluation episode (frames only with a camera: after the
+    reset, every ``every``-th step and after the last)."""
+    import jax  # the train extra: a report without videos does not need it
 
     from d5rl.training.envs import episode_scorer
 
-    obs, info = env.reset(seed=seed)
-    frames = [camera()] if camera else []
-    ret, t, done = 0.0, 0, False
     key = jax.random.PRNGKey(seed)
-    while not done:
+
+    def act(observations, live, steps):
+        nonlocal key
         key, k = jax.random.split(key)
-        batch = jax.tree_util.tree_map(lambda x: np.asarray(x)[None], obs)
-        action = np.asarray(agent.eval_actions(batch, seed=k))[0]
-        obs, reward, terminated, truncated, info = env.step(action)
-        ret, t, done = ret + float(reward), t + 1, terminated or truncated
-        if camera and (t % every == 0 or done):
+        batch = jax.tree_util.tree_map(lambda x: np.asarray(x)[None], observations[0])
+        return np.asarray(agent.eval_actions(batch, seed=k))
+
+    frames = []
+
+    def film(step: Step) -> None:
+        if (step.t + 1) % every == 0 or step.done:
             frames.append(camera())
+
+    (episode,) = rollout(
+        [env],
+        act,
+        [seed],
+        on_reset=(lambda *_: frames.append(camera())) if camera else None,
+        on_step=film if camera else None,
+    )
     scorer = episode_scorer(task)
-    return (scorer(ret, info) if scorer is not None else ret), frames
+    return (scorer(episode.ret, episode.info) if scorer is not None else episode.ret), frames
 
 
 def typical_rollout(cell_dir: Path, task: str, *, episodes: int = 5, size=GIF_SIZE, every: int = EVERY):

@@ -4,6 +4,8 @@ from __future__ import annotations
 
 import functools
 import json
+import multiprocessing
+import signal
 import sys
 import time
 from collections.abc import Callable
@@ -16,7 +18,10 @@ import numpy as np
 
 from d5rl.errors import D5RLError, is_int
 from d5rl.files import read_json, write_atomic
+from d5rl.parallel import die_with_parent
+from d5rl.rollout import Step, rollout
 from d5rl.training.envs import env_factory, episode_scorer
+from d5rl.video import check_video_path, write_gif, write_video
 
 PROGRESS_FORMAT = 1
 
@@ -57,21 +62,8 @@ def evaluate(
     if not is_int(seed, lo=0):
         raise D5RLError(f"the evaluation seed must be a non-negative integer, got {seed!r}", "pass e.g. --seed 0")
     if video_path is not None:
-        from d5rl.video import check_video_path
-
         video_path = check_video_path(video_path)
     num_envs = max(1, min(int(num_envs), int(num_episodes)))
-    render = video_path is not None
-    fns = [
-        env_fn or env_factory(task_id, frame_stack, "rgb_array" if (render and i == 0) else None)
-        for i in range(num_envs)
-    ]
-    envs = [fn() for fn in fns] if not processes else None
-    vec = (
-        gym.vector.AsyncVectorEnv([functools.partial(_in_worker, fn) for fn in fns], copy=True, context="spawn")
-        if processes
-        else None
-    )
     evaluation = {
         "task_id": task_id,
         "seed": int(seed),
@@ -79,76 +71,50 @@ def evaluate(
         "frame_stack": int(frame_stack),
     }
     episodes = progress.load(evaluation) if progress is not None else []  # {"return", "length", "success", "info"}
-    if episodes and render and not _video_file(video_path):
+    if episodes and video_path is not None and not _video_file(video_path):
         episodes = []  # the first episode's video was not written: evaluate it again
-    frames: list[np.ndarray] = []
+    if episodes:
+        print(f"evaluation resumes at episode {len(episodes) + 1} of {num_episodes} ({progress.path.name})", flush=True)
     key = jax.random.PRNGKey(seed)
-    ep = len(episodes)
-    if ep:
-        print(f"evaluation resumes at episode {ep + 1} of {num_episodes} ({progress.path.name})", flush=True)
-    try:
-        while ep < num_episodes:
-            n = min(num_envs, num_episodes - ep)
-            seeds = [seed + ep + i for i in range(n)]
-            if processes:
-                obs_b, _ = vec.reset(seed=seeds + [seed + 10**6 + i for i in range(num_envs - n)])
-                obs = [jax.tree_util.tree_map(lambda x: x[i], obs_b) for i in range(n)]
-            else:
-                obs = [envs[i].reset(seed=s)[0] for i, s in enumerate(seeds)]
-            done = np.zeros(n, bool)
-            ret, length, succ = np.zeros(n), np.zeros(n, int), np.zeros(n, bool)
-            last: list[dict] = [{} for _ in range(n)]
-            if render and ep == 0:
-                frames.append(_render(envs, vec, processes))
-            while not done.all():
-                live = np.flatnonzero(~done)
-                batch = _stack_obs([obs[i] for i in live])
-                keys = _step_keys(key, ep + live, length[live])
-                actions = np.asarray(agent.eval_actions(batch, seed=keys))
-                if processes:
-                    full = np.zeros((num_envs,) + actions.shape[1:], np.float32)
-                    full[live] = actions
-                    obs_b, r, term, trunc, info = vec.step(full)
-                    for j in live:
-                        obs[j] = jax.tree_util.tree_map(lambda x: x[j], obs_b)
-                        ret[j] += r[j]
-                        length[j] += 1
-                        s = info.get("success")
-                        succ[j] |= bool(s[j]) if s is not None else False
-                        done[j] = term[j] or trunc[j]
-                        if done[j]:
-                            last[j] = _unbatch_info(info, j)
-                else:
-                    for a, j in zip(actions, live):
-                        obs[j], r, term, trunc, info = envs[j].step(a)
-                        ret[j] += r
-                        length[j] += 1
-                        succ[j] |= bool(info.get("success", False))
-                        done[j] = term or trunc
-                        if done[j]:
-                            last[j] = _final_info(info)
-                if render and ep == 0 and not done[0]:
-                    frames.append(_render(envs, vec, processes))
+    with _EvalEnvs(task_id, frame_stack, num_envs, processes, video_path is not None, env_fn) as envs:
+        while len(episodes) < num_episodes:
+            first = len(episodes)
+            seeds = [seed + first + i for i in range(min(num_envs, num_episodes - first))]
+            film = _Film(envs.render) if video_path is not None and first == 0 else None
+            done = rollout(
+                envs.envs,
+                _batched_policy(agent, key, first),
+                seeds,
+                on_reset=film.on_reset if film else None,
+                on_step=film.on_step if film else None,
+            )
             episodes += [
-                {"return": float(ret[j]), "length": int(length[j]), "success": bool(succ[j]), "info": last[j]}
-                for j in range(n)
+                {"return": e.ret, "length": e.length, "success": e.success, "info": _final_info(e.info)} for e in done
             ]
-            ep += n
-            if render and frames:
-                _write_video(Path(video_path), frames)
-                frames = []
-            if progress is not None and ep < num_episodes:
+            if film and film.frames:
+                _write_video(Path(video_path), film.frames)
+            if progress is not None and len(episodes) < num_episodes:
                 progress.save(evaluation, episodes)
-    except BaseException:
-        if vec is not None:  # Ctrl-C or an error: stop the workers now, mid-step or not
-            vec.close(terminate=True)
-            vec = None
-        raise
-    finally:
-        if vec is not None:
-            vec.close()
-        for e in envs or []:
-            e.close()
+    out = _summary(task_id, episodes, scored=env_fn is None)
+    if video_path is not None and _video_file(video_path):
+        out["video"] = str(_video_file(video_path))
+    if progress is not None:
+        progress.clear()
+    return out
+
+
+def _batched_policy(agent, key, first: int):
+    """The agent's evaluation actions for a batch of episodes numbered from ``first``, each drawn with the key
+    of its (episode, step) (see :func:`_step_keys`)."""
+
+    def act(observations, live, steps):
+        return np.asarray(agent.eval_actions(_stack_obs(observations), seed=_step_keys(key, first + live, steps)))
+
+    return act
+
+
+def _summary(task_id: str, episodes: list[dict], *, scored: bool) -> dict[str, Any]:
+    """The means :func:`evaluate` returns over its episodes (``score`` only for a registered task's env)."""
     returns = [e["return"] for e in episodes]
     out = {
         "return": float(np.mean(returns)),
@@ -161,16 +127,60 @@ def evaluate(
     stats = [e["info"].get("episode_stats") or {} for e in episodes]
     if any(stats):
         out["stats"] = {k: float(np.mean([st[k] for st in stats if k in st])) for k in sorted(set().union(*stats))}
-    scorer = episode_scorer(task_id) if env_fn is None else None
+    scorer = episode_scorer(task_id) if scored else None
     if scorer is not None:
         scores = np.asarray([scorer(e["return"], e["info"]) for e in episodes], np.float64)
         out["score"] = float(scores.mean())
         out["score_std"] = float(scores.std())
-    if render and _video_file(video_path):
-        out["video"] = str(_video_file(video_path))
-    if progress is not None:
-        progress.clear()
     return out
+
+
+class _Film:
+    """The frames of a rollout's first episode: after its reset and after each of its steps but the last."""
+
+    def __init__(self, render: Callable[[], np.ndarray]):
+        self.render, self.frames = render, []
+
+    def on_reset(self, i: int, obs, info) -> None:
+        if i == 0:
+            self.frames.append(self.render())
+
+    def on_step(self, step: Step) -> None:
+        if step.episode == 0 and not step.done:
+            self.frames.append(self.render())
+
+
+class _EvalEnvs:
+    """The ``num_envs`` envs an evaluation steps: in this process, or each in its own process (a Gymnasium
+    ``AsyncVectorEnv``); the first renders when the evaluation is filmed.  On an error or Ctrl-C the worker
+    processes are stopped at once, mid-step or not."""
+
+    def __init__(self, task_id, frame_stack, num_envs, processes, render, env_fn):
+        fns = [
+            env_fn or env_factory(task_id, frame_stack, "rgb_array" if (render and i == 0) else None)
+            for i in range(num_envs)
+        ]
+        self.processes = processes
+        if processes:
+            parts = [functools.partial(_in_worker, fn) for fn in fns]
+            self.envs = gym.vector.AsyncVectorEnv(parts, copy=True, context="spawn")
+        else:
+            self.envs = [fn() for fn in fns]
+
+    def render(self) -> np.ndarray:
+        if self.processes:
+            return np.asarray(self.envs.call("render")[0])
+        return np.asarray(self.envs[0].render())
+
+    def __enter__(self):
+        return self
+
+    def __exit__(self, kind, *_):
+        if self.processes:
+            self.envs.close(terminate=kind is not None)
+        else:
+            for e in self.envs:
+                e.close()
 
 
 class EvalProgress:
@@ -242,34 +252,13 @@ def _final_info(info: dict) -> dict:
     return out
 
 
-def _unbatch_info(info: dict, j: int) -> dict:
-    """Environment ``j``'s part of a vector env's info, as :func:`_final_info` keeps it."""
-    out: dict[str, Any] = {}
-    if "score" in info:
-        out["score"] = info["score"][j]
-    if "episode_stats" in info:
-        out["episode_stats"] = {k: v[j] for k, v in info["episode_stats"].items() if not k.startswith("_")}
-    return _final_info(out)
-
-
 def _in_worker(make_env: Callable[[], gym.Env]) -> gym.Env:
     """Build an env inside an AsyncVectorEnv worker that dies with the evaluating process and leaves
     Ctrl-C to it (which then terminates the workers), so no worker outlives its evaluation."""
-    import multiprocessing
-    import signal
-
-    from d5rl.parallel import die_with_parent
-
     if multiprocessing.parent_process() is not None:  # AsyncVectorEnv also calls this once in the parent
         signal.signal(signal.SIGINT, signal.SIG_IGN)
         die_with_parent()
     return make_env()
-
-
-def _render(envs, vec, processes):
-    if processes:
-        return np.asarray(vec.call("render")[0])
-    return np.asarray(envs[0].render())
 
 
 def _video_file(path: str | Path | None) -> Path | None:
@@ -282,8 +271,6 @@ def _video_file(path: str | Path | None) -> Path | None:
 def _write_video(path: Path, frames) -> None:
     """An MP4, or a GIF without ffmpeg; either is renamed into place whole, so that a kill never leaves a
     truncated video for a resumed evaluation to trust."""
-    from d5rl.video import write_gif, write_video
-
     try:
         write_video(path, frames, fps=20)
     except (ImportError, RuntimeError, ValueError):  # no ffmpeg (the path was checked): fall back to GIF
