@@ -32,6 +32,7 @@ FLOORS = (
         "d5rl.assets",
         "d5rl.registry",
         "d5rl.version",
+        "d5rl.rollout",  # the one rollout loop: numpy and Gymnasium only
     ),
     ("d5rl.rendering", "d5rl.video"),  # offscreen rendering and video files
     ("d5rl.envs",),  # simulation: models, tasks, registration
