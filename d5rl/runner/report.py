@@ -605,6 +605,18 @@ def write_report(
     results = collect(run_dir)
     if not results:
         raise ReportError(f"no benchmark cells under {run_dir}", "run `d5rl bench --out RUN_DIR ...` first")
+    if not any(r.counts and r.final for r in results):
+        stale = [r for r in results if r.done and r.stale is not None]
+        if stale:
+            raise ReportError(
+                f"every finished cell under {run_dir} is stale ({len(stale)}; e.g. {stale[0].task}/"
+                f"{stale[0].algo}/seed{stale[0].seed}: {stale[0].stale}), so no table would have an entry",
+                "train them again with the grid's `d5rl bench` command (add --dry-run to list them first)",
+            )
+        raise ReportError(
+            f"no finished cell under {run_dir} has evaluations",
+            "check the cells' log.txt / error.txt, then resume with the same `d5rl bench` command",
+        )
     out = Path(out_dir) if out_dir else run_dir / "report"
     out.mkdir(parents=True, exist_ok=True)
 
@@ -678,11 +690,6 @@ def write_report(
         if vs:
             (out / f"{name}_vs_paper.md").write_text(vs)
             parts.append(vs)
-    if not agg_rows:
-        raise ReportError(
-            f"no finished cell under {run_dir} has evaluations",
-            "check the cells' log.txt / error.txt, then resume with the same `d5rl bench` command",
-        )
     with open(out / "aggregate.csv", "w", newline="") as f:
         w = csv.writer(f)
         w.writerow(["table", "method", "group", "tasks", "runs", "iqm", "iqm_lo", "iqm_hi", "mean"])

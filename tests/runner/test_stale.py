@@ -12,6 +12,7 @@ import pytest
 from d5rl.datasets.generation import data_identity, stale_data
 from d5rl.runner import expand_grid, run_bench, write_report
 from d5rl.runner.grid import stale_reason
+from d5rl.runner.report import ReportError
 
 JOB = "tests.runner.test_stale:data_job"
 TASK = "toy-reach-v0"
@@ -103,3 +104,13 @@ def test_a_result_is_stale_when_its_agent_version_or_resolved_settings_changed(t
     assert why({**record, "train": {**record["train"], "eval_episodes": 99}}) is None  # evaluation only
     custom = dataclasses.replace(cell, job=JOB)  # a custom job's config.json is its own business
     assert stale_agent(custom, tmp_path) is None
+
+
+def test_a_report_of_only_stale_cells_says_so_and_writes_nothing(tmp_path):
+    cells = expand_grid([TASK], ["bc"], [0, 1], 10, 0, job=JOB, tuned=False)
+    run_bench(cells, tmp_path, workers=0, progress=False)
+    for c in cells:
+        _make_stale(c.directory(tmp_path))
+    with pytest.raises(ReportError, match=r"every finished cell under .* is stale \(2; e\.g\. toy-reach-v0/bc/seed0"):
+        write_report(tmp_path, reps=50, plots=False)
+    assert not (tmp_path / "report").exists()  # no half-written report beside a stale one
