@@ -4,7 +4,8 @@ Like the relay-policy-learning data that D4RL and D5RL used, every episode perfo
 subtasks in a fixed order; the 22 combinations below never contain the ``partial``
 task's full set (microwave, kettle, bottom burner, light switch), so that task needs
 combinatorial generalization.  Episodes end when the demonstrator finishes its fourth
-subtask (or after 280 steps); 563 episodes are spread over the combinations round-robin.
+subtask (or after 280 steps); 563 episodes are spread over the combinations round-robin
+(or, with ``habit``, as an operator with a habit would perform them: :func:`order_probabilities`).
 
 Stored per step: simulator ``states`` (to re-render any camera at any resolution),
 ``observations/proprio`` (9 joint positions) and ``infos/completed`` (per transition,
@@ -15,6 +16,7 @@ the episode's own four subtasks; each task relabels them with :func:`relabel`.
 
 from __future__ import annotations
 
+import functools
 from collections.abc import Sequence
 
 import numpy as np
@@ -51,6 +53,46 @@ assert all(set(c) != set(PARTIAL) for c in COMBINATIONS)
 MAX_STEPS = 280
 
 
+def order_probabilities(habit: float) -> list[float]:
+    """How often an operator with a habit performs each of :data:`COMBINATIONS`: at every choice of the
+    next subtask, the habitual one (the first in ``SUBTASK_NAMES`` order that continues some combination)
+    with probability ``habit``, each other possible one with an equal share of the rest."""
+    out = []
+    for combo in COMBINATIONS:
+        p = 1.0
+        for j in range(4):
+            options = sorted({c[j] for c in COMBINATIONS if c[:j] == combo[:j]}, key=SUBTASK_NAMES.index)
+            if len(options) > 1:
+                p *= habit if combo[j] == options[0] else (1.0 - habit) / (len(options) - 1)
+        out.append(p)
+    return out
+
+
+def combination_schedule(probabilities: Sequence[float], n: int) -> list[int]:
+    """The combination of each of the first ``n`` episodes: weighted round-robin (each episode goes to
+    the combination furthest behind its share), so every prefix of the dataset has the proportions
+    within one episode per combination, and episode ``i``'s combination does not depend on ``n``."""
+    credit = [0.0] * len(probabilities)
+    out = []
+    for _ in range(n):
+        credit = [c + p for c, p in zip(credit, probabilities)]
+        k = max(range(len(credit)), key=lambda j: (credit[j], -j))
+        credit[k] -= 1.0
+        out.append(k)
+    return out
+
+
+@functools.lru_cache(maxsize=4)
+def _schedule(habit: float, n: int) -> tuple[int, ...]:
+    return tuple(combination_schedule(order_probabilities(habit), n))
+
+
+def habit_schedule(habit: float, n: int) -> tuple[int, ...]:
+    """The combination index of each of the first (at least) ``n`` episodes of an operator with ``habit``
+    (computed in blocks of 1024)."""
+    return _schedule(float(habit), -(-n // 1024) * 1024)
+
+
 class KitchenStandardGenerator:
     """Episode generator (see the module docstring)."""
 
@@ -59,14 +101,21 @@ class KitchenStandardGenerator:
     # 6: no detours via random points and no pauses (Style.sample): a unimodal BC could not follow them
     version = "kitchen-standard-demos-6"
 
-    def __init__(self, task_id: str | None = None, max_steps: int = MAX_STEPS):
+    def __init__(self, task_id: str | None = None, max_steps: int = MAX_STEPS, habit: float | None = None):
         from d5rl.envs.kitchen.task import KitchenEnv
+
+        # None: combination ``index mod 22`` (the dataset); a probability: the combinations of an operator
+        # with that habit (habit_schedule), for docs/experiments/kitchen-learnability
+        self.habit = habit
 
         self.env = KitchenEnv(obs_mode="state", tasks=COMBINATIONS[0])
         self.max_steps = int(max_steps)
 
     def episode(self, index: int, rng: np.random.Generator) -> Episode:
-        combo_index = index % len(COMBINATIONS)
+        if self.habit is None:
+            combo_index = index % len(COMBINATIONS)
+        else:
+            combo_index = habit_schedule(self.habit, index + 1)[index]
         return self.demonstrate(COMBINATIONS[combo_index], rng, meta={"combination": combo_index})
 
     def demonstrate(self, subtasks: Sequence[str], rng: np.random.Generator, meta: dict | None = None) -> Episode:

@@ -13,7 +13,15 @@ from d5rl.cli import main
 from d5rl.datasets.loading import load_dataset
 from d5rl.envs.base import qpos_of_states
 from d5rl.envs.kitchen import data as kdata
-from d5rl.envs.kitchen.data import COMBINATIONS, KitchenStandardGenerator, relabel, state_episode
+from d5rl.envs.kitchen.data import (
+    COMBINATIONS,
+    KitchenStandardGenerator,
+    combination_schedule,
+    habit_schedule,
+    order_probabilities,
+    relabel,
+    state_episode,
+)
 from d5rl.envs.kitchen.subtasks import MIXED, PARTIAL, SUBTASK_NAMES, CompletionChecker
 from d5rl.envs.kitchen.task import KitchenEnv
 
@@ -23,6 +31,34 @@ def test_combinations_never_contain_the_partial_task():
     assert all(len(set(c)) == 4 and set(c) <= set(SUBTASK_NAMES) for c in COMBINATIONS)
     assert all(set(c) != set(PARTIAL) for c in COMBINATIONS)
     assert tuple(MIXED) in COMBINATIONS
+
+
+def test_order_probabilities_follow_the_habit():
+    p = dict(zip(COMBINATIONS, order_probabilities(0.8)))
+    assert sum(p.values()) == pytest.approx(1.0)
+    # the habitual branch at every choice: microwave (of 4 first subtasks), kettle (of microwave's 4
+    # continuations), bottom burner (of 4), top burner (of 3)
+    assert p[("microwave", "kettle", "bottom burner", "top burner")] == pytest.approx(0.8**4)
+    # the mixed task's order: habitual, habitual, one of the 3 others after (microwave, kettle), habitual
+    assert p[tuple(MIXED)] == pytest.approx(0.8 * 0.8 * 0.2 / 3 * 0.8)
+    # the top burner first (one of the 3 other first subtasks) has a single continuation
+    assert p[("top burner", "light switch", "slide cabinet", "hinge cabinet")] == pytest.approx(0.2 / 3)
+    assert min(order_probabilities(0.8)) > 0  # every combination stays in the data
+
+
+def test_combination_schedule_keeps_every_prefix_in_proportion():
+    probs = order_probabilities(0.8)
+    full = combination_schedule(probs, 563)
+    assert combination_schedule(probs, 100) == full[:100]  # episode i's combination does not depend on n
+    for n in (22, 100, 563):
+        counts = np.bincount(full[:n], minlength=len(COMBINATIONS))
+        assert np.all(np.abs(counts - n * np.asarray(probs)) < 1.0), n
+    assert habit_schedule(0.8, 563)[:563] == tuple(full)
+    # a generator with a habit performs the scheduled combinations; without one, round-robin
+    gen = KitchenStandardGenerator(max_steps=2, habit=0.8)
+    assert [gen.episode(i, np.random.default_rng(i)).meta["combination"] for i in range(3)] == full[:3]
+    assert KitchenStandardGenerator(max_steps=2).episode(23, np.random.default_rng(0)).meta["combination"] == 1
+    assert sorted(set(full)) == list(range(len(COMBINATIONS)))  # every combination appears
 
 
 def test_generator_is_a_pure_function_of_index_and_rng():
