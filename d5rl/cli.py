@@ -312,8 +312,8 @@ def build_parser() -> argparse.ArgumentParser:
 
 # Subcommands that live next to the code they drive.
 _PLUGINS = [
-    ("d5rl.training.cli", "add_train_parser"),
-    ("d5rl.training.cli", "add_eval_parser"),
+    ("d5rl.runner.train_cli", "add_train_parser"),
+    ("d5rl.runner.train_cli", "add_eval_parser"),
     ("d5rl.runner.cli", "add_bench_parser"),
     ("d5rl.runner.cli", "add_report_parser"),
     ("d5rl.browse.server", "add_browse_parser"),

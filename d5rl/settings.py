@@ -1,8 +1,8 @@
 """Per-task settings: one file (``d5rl/configs/settings.json``), one resolver.
 
-Every command that trains or describes a run resolves its configuration here, so
-``d5rl train``, ``d5rl bench``, ``--show-config`` and the ``config.json`` that ``d5rl eval``
-reads can never disagree.  Layers, lowest first:
+Every command that trains or describes a run resolves its configuration here, once, into a
+:class:`~d5rl.training.config.RunSpec` that the trainer takes whole, so ``d5rl train``, ``d5rl bench``,
+``--show-config`` and the ``config.json`` that ``d5rl eval`` reads can never disagree.  Layers, lowest first:
 
 agent config
     the agent's ``get_config()`` defaults; ``observations[obs]`` ("all", then the algorithm);
@@ -19,12 +19,16 @@ training-loop config
 
 from __future__ import annotations
 
-import dataclasses
 import functools
 import json
 from collections.abc import Iterable, Mapping
 from pathlib import Path
 from typing import Any
+
+from d5rl.agents import canonical_name, get_agent
+from d5rl.agents.config import AGENT_BOUNDS, check_bounds
+from d5rl.registry import get_spec
+from d5rl.training.config import TRAIN_BOUNDS, RunSpec, get_train_config, split_overrides
 
 SETTINGS_PATH = Path(__file__).resolve().parent / "configs" / "settings.json"
 
@@ -40,8 +44,6 @@ def _plain(d: Mapping | None) -> dict:
 
 def task_keys(task_id: str) -> tuple[str, str]:
     """``(group, observation)`` of a task."""
-    from d5rl.registry import get_spec
-
     spec = get_spec(task_id)
     return spec.benchmark_group, spec.observation
 
@@ -49,8 +51,6 @@ def task_keys(task_id: str) -> tuple[str, str]:
 def layers(task_id: str, algo: str, agent_keys=None) -> tuple[dict, dict]:
     """``(agent values, training-loop values)`` the settings file gives a task and algorithm; "all"
     entries apply the keys the agent has (``agent_keys``; every key if None)."""
-    from d5rl.agents import canonical_name
-
     algo = canonical_name(algo)
     group, obs = task_keys(task_id)
     data = table()
@@ -61,28 +61,6 @@ def layers(task_id: str, algo: str, agent_keys=None) -> tuple[dict, dict]:
     return agent, _plain(data["protocol"].get(group))
 
 
-@dataclasses.dataclass(frozen=True)
-class Resolved:
-    """Everything a run is configured by."""
-
-    algo: str
-    task_id: str
-    agent: Any  # d5rl.agents.config.Config
-    train: Any  # d5rl.agents.config.Config
-    offline_steps: int
-    online_steps: int
-
-    def to_json(self) -> dict:
-        return {
-            "algo": self.algo,
-            "task_id": self.task_id,
-            "offline_steps": self.offline_steps,
-            "online_steps": self.online_steps,
-            "agent": self.agent.to_dict(),
-            "train": self.train.to_dict(),
-        }
-
-
 def resolve(
     algo: str,
     task_id: str,
@@ -90,13 +68,11 @@ def resolve(
     *,
     offline_steps: int = 0,
     online_steps: int = 0,
+    seed: int = 0,
     tuned: bool = True,
-) -> Resolved:
-    """The agent and training-loop configs of one run (``tuned=False``: the agent's own defaults)."""
-    from d5rl.agents import get_agent
-    from d5rl.agents.config import AGENT_BOUNDS, check_bounds
-    from d5rl.training.config import TRAIN_BOUNDS, get_train_config, split_overrides
-
+) -> RunSpec:
+    """The run spec of one run: its agent and training-loop configs (``tuned=False``: the agent's own
+    defaults), step counts and seed."""
     agent_cls, config_fn = get_agent(algo)
     defaults = config_fn()
     agent_layer, train_layer = layers(task_id, algo, defaults) if tuned else ({}, {})
@@ -108,15 +84,15 @@ def resolve(
     if train_cfg.frame_stack is None:
         train_cfg = train_cfg.replace(frame_stack=3 if obs == "pixels" else 1)
     agent_cfg = agent_cls.resolve_config(agent_cfg, offline_steps=int(offline_steps), online_steps=int(online_steps))
-    return Resolved(agent_cfg.agent_name, task_id, agent_cfg, train_cfg, int(offline_steps), int(online_steps))
+    return RunSpec(
+        agent_cfg.agent_name, task_id, agent_cfg, train_cfg, int(offline_steps), int(online_steps), int(seed)
+    )
 
 
 def run_steps(algo: str, offline_steps: int | None, online_steps: int) -> tuple[int, int]:
     """``(offline, online)`` steps a run really takes: agents that learn from the data only inside their
     online phase (RLPD: its online batches are half offline data) skip the offline phase of an
     offline-to-online run; ``None`` offline steps means the paper's 500k (or 0 for those agents)."""
-    from d5rl.agents import get_agent
-
     pretrains = getattr(get_agent(algo)[0], "offline_pretraining", True)
     if online_steps > 0 and not pretrains:
         return 0, int(online_steps)

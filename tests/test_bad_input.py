@@ -175,24 +175,25 @@ def test_eval_episodes(capsys, tmp_path):
 
 def test_eval_on_a_task_with_other_spaces(capsys, tmp_path):
     from d5rl.envs.toy.data import toy_dataset
+    from d5rl.settings import resolve
     from d5rl.training.loop import train
 
     run = tmp_path / "run"
     train(
-        "bc",
-        "toy-reach-v0",
-        8,
-        0,
-        0,
-        [
-            "hidden_dims=8",
-            "batch_size=8",
-            "eval_episodes=1",
-            "eval_envs=1",
-            "progress=false",
-            "tensorboard=false",
-            "checkpoint_interval=8",
-        ],
+        resolve(
+            "bc",
+            "toy-reach-v0",
+            [
+                "hidden_dims=8",
+                "batch_size=8",
+                "eval_episodes=1",
+                "eval_envs=1",
+                "progress=false",
+                "tensorboard=false",
+                "checkpoint_interval=8",
+            ],
+            offline_steps=8,
+        ),
         run,
         dataset=toy_dataset(4),
     )

@@ -1,5 +1,6 @@
 """One source of per-task settings, one resolver: train, bench, --show-config and eval agree."""
 
+import dataclasses
 import json
 import re
 
@@ -8,12 +9,14 @@ import pytest
 pytest.importorskip("jax")
 
 import d5rl
+from d5rl import settings
 from d5rl.agents import AGENTS, get_agent
 from d5rl.cli import main
 from d5rl.runner import jobs
 from d5rl.runner.grid import expand_grid, parse_assignments
-from d5rl.settings import resolve, run_steps, table
-from d5rl.training.config import get_train_config
+from d5rl.settings import resolve, table
+from d5rl.training import loop
+from d5rl.training.config import RunSpec, get_train_config
 
 TASKS = [t for t in d5rl.list_tasks() if not t.startswith("test-")]
 
@@ -90,23 +93,51 @@ def test_every_entry_cites_a_checkable_source():
         assert claim not in text, claim
 
 
-def test_train_bench_and_show_config_agree_for_every_task_and_algorithm(capsys, monkeypatch, tmp_path):
-    calls = []
-    monkeypatch.setattr("d5rl.training.loop.train", lambda *a, **k: calls.append((a, k)) or {})
+def test_train_bench_and_show_config_pass_the_same_run_spec_for_every_task_and_algorithm(capsys, monkeypatch, tmp_path):
+    """`d5rl train` and a bench cell hand the trainer a run spec; --show-config prints the one `d5rl train` would
+    hand it.  The bench cell's differs only by its progress flag (the grid shows its own)."""
+    specs = []
+    monkeypatch.setattr("d5rl.training.loop.train", lambda spec, run_dir=None, **k: specs.append(spec) or {})
     for task in TASKS:
         for algo in AGENTS:
-            offline, online = run_steps(algo, 10_000, 0)
             assert main(["train", algo, task, "--offline-steps", "10000", "--show-config"]) == 0
             shown = json.loads(capsys.readouterr().out)
+            specs.clear()
+            assert main(["train", algo, task, "--offline-steps", "10000", "--run-dir", str(tmp_path / "r")]) == 0
+            capsys.readouterr()
             [cell] = expand_grid([task], [algo], [0], 10_000, 0)
-            calls.clear()
             jobs.train_job(cell, tmp_path)
-            (a_algo, a_task, a_off, a_on, _, overrides, _), kw = calls[0]
-            in_bench = resolve(a_algo, a_task, overrides, offline_steps=a_off, online_steps=a_on, tuned=kw["tuned"])
-            direct = resolve(algo, task, offline_steps=offline, online_steps=online)
-            assert shown["agent"] == direct.agent.to_dict() == in_bench.agent.to_dict(), (task, algo)
-            # the bench only adds its own progress flag to the loop's settings
-            assert {**shown["train"], "progress": False} == in_bench.train.to_dict(), (task, algo)
+            in_train, in_bench = specs
+            assert isinstance(in_train, RunSpec) and isinstance(in_bench, RunSpec)
+            assert shown == in_train.to_json(), (task, algo)
+            assert in_bench == dataclasses.replace(in_train, train=in_train.train.replace(progress=False)), (task, algo)
+
+
+def test_settings_are_resolved_once_per_d5rl_train(monkeypatch, tmp_path, capsys):
+    """One resolution per command, whichever way the code reaches the resolver: every call of ``resolve`` goes
+    through ``layers`` (tuned runs), and the spec the trainer gets is the one ``resolve`` returned."""
+    from d5rl.envs.toy.data import toy_dataset
+
+    returned, layered = [], []
+    real_resolve, real_layers = settings.resolve, settings.layers
+    monkeypatch.setattr(settings, "resolve", lambda *a, **k: returned.append(real_resolve(*a, **k)) or returned[-1])
+    monkeypatch.setattr(settings, "layers", lambda *a, **k: layered.append(a) or real_layers(*a, **k))
+    monkeypatch.setattr("d5rl.training.loop.load_task_dataset", lambda task, **kw: toy_dataset(4))
+    trained = []
+    real_train = loop.train
+    monkeypatch.setattr(loop, "train", lambda spec, *a, **k: trained.append(spec) or real_train(spec, *a, **k))
+    argv = ["train", "bc", "toy-reach-v0", "--offline-steps", "8", "--seed", "3", "--run-dir", str(tmp_path / "r")]
+    argv += ["--set", "hidden_dims=16,16", "--set", "eval_episodes=1", "--set", "tensorboard=false"]
+    assert main(argv) == 0
+    assert len(returned) == len(layered) == 1 and trained == returned
+    assert trained[0].seed == 3 and json.loads(capsys.readouterr().out)["step"] == 8
+    written = json.loads((tmp_path / "r" / "config.json").read_text())
+    assert {k: written[k] for k in ("algo", "task_id", "seed", "train")} == {
+        k: trained[0].to_json()[k] for k in ("algo", "task_id", "seed", "train")
+    }
+    returned.clear(), layered.clear()
+    assert main(["train", "bc", "toy-reach-v0", "--offline-steps", "8", "--show-config"]) == 0
+    assert len(returned) == len(layered) == 1
 
 
 def test_what_the_settings_say():
@@ -165,7 +196,7 @@ def test_a_run_records_the_resolved_config_that_eval_reads(tmp_path):
     from d5rl.training.loop import load_run, train
 
     over = ["hidden_dims=16,16", "eval_episodes=1", "eval_envs=1", "progress=false", "tensorboard=false"]
-    train("iql", "toy-reach-v0", 16, 0, 0, over, tmp_path / "run", dataset=toy_dataset(4))
+    train(resolve("iql", "toy-reach-v0", over, offline_steps=16), tmp_path / "run", dataset=toy_dataset(4))
     written = json.loads((tmp_path / "run" / "config.json").read_text())
     want = resolve("iql", "toy-reach-v0", over, offline_steps=16)
     assert written["agent"] == want.agent.to_dict() and written["train"] == want.train.to_dict()

@@ -16,14 +16,11 @@ import argparse
 import sys
 from pathlib import Path
 
-from d5rl.runner.grid import LOCK_FILE, WORKER_FILE
-from d5rl.training.checkpoint import LATEST, PREVIOUS, RUN_LOCK, TMP_PREFIX
-
-_NEVER = (PREVIOUS, LOCK_FILE, RUN_LOCK, WORKER_FILE, "tb")  # tb: TensorBoard copies of the metrics
+from d5rl.training.rundir import CHECKPOINT, CHECKPOINT_TMP_PREFIX, NOT_ARCHIVED, RunDir
 
 
 def _skipped(rel: Path) -> bool:
-    return any(p == LATEST or p in _NEVER or p.startswith(TMP_PREFIX) for p in rel.parts)
+    return any(p == CHECKPOINT or p in NOT_ARCHIVED or p.startswith(CHECKPOINT_TMP_PREFIX) for p in rel.parts)
 
 
 def _files(d: Path) -> list[Path]:
@@ -44,7 +41,8 @@ def archive_files(run_dir: Path | str, budget_bytes: int) -> tuple[list[Path], l
     unfinished = [r.directory for r in results if not r.done]
     kept = []
     for cell_dir in best + unfinished:
-        ckpt = _files(cell_dir / LATEST) if (cell_dir / LATEST).is_dir() else []
+        latest = RunDir(cell_dir).checkpoint
+        ckpt = _files(latest) if latest.is_dir() else []
         extra = sum(p.stat().st_size for p in ckpt)
         if ckpt and size + extra <= budget_bytes:  # (best cells are finished: the two lists are disjoint)
             files += ckpt

@@ -26,20 +26,9 @@ from pathlib import Path
 from d5rl.errors import D5RLError
 from d5rl.files import write_atomic
 from d5rl.parallel import configure_worker, connect_ray
-from d5rl.runner.execute import (
-    EXIT_CODES,
-    LOG_FILE,
-    clear_job_outputs,
-    execute_cell,
-    is_done,
-    read_failures,
-    record_failure,
-    reset_cell,
-    write_cell_file,
-)
+from d5rl.runner.execute import EXIT_CODES, clear_job_outputs, execute_cell, record_failure, reset_cell
 from d5rl.runner.grid import DEFAULT_JOB, Cell, GridError, read_cell, same_run, stale_reason
-
-BENCH_FILE = "bench.json"
+from d5rl.training.rundir import BENCH_LOG, RunDir
 
 
 @dataclasses.dataclass
@@ -60,7 +49,7 @@ class BenchResult:
             f"{f', {len(self.stale)} rerun on new data' if self.stale else ''} in {self.wall_s:.1f} s"
         )
         for key, err in self.failed.items():
-            s += f"\n  FAILED {key}: {err.splitlines()[0] if err else ''}\n    see {self.run_dir / key / 'error.txt'}"
+            s += f"\n  FAILED {key}: {err.splitlines()[0] if err else ''}\n    see {RunDir(self.run_dir / key).error}"
         return s
 
 
@@ -77,7 +66,7 @@ def prepare(cells: Iterable[Cell], run_dir: Path | str, argv: list[str] | None =
     cells = list(cells)
     for cell in cells:
         cdir = cell.directory(run_dir)
-        old, done = read_cell(cdir), is_done(cdir)
+        old, done = read_cell(cdir), RunDir(cdir).is_done()
         if old is not None and not same_run(old, cell) and done:
             diff = {k: (v, getattr(cell, k)) for k, v in old.to_json().items() if v != getattr(cell, k)}
             raise GridError(
@@ -87,8 +76,8 @@ def prepare(cells: Iterable[Cell], run_dir: Path | str, argv: list[str] | None =
         if old != cell and not done:  # a finished cell keeps the record of how it ran
             if old is not None and not same_run(old, cell):  # new settings: its partial outputs are stale
                 clear_job_outputs(cdir)
-            write_cell_file(cell, cdir)
-    log_path = run_dir / BENCH_FILE
+            RunDir(cdir).write_cell(cell.to_json())
+    log_path = run_dir / BENCH_LOG
     launches = []
     if log_path.exists():
         with contextlib.suppress(json.JSONDecodeError):
@@ -175,7 +164,7 @@ def run_bench(
     pending = []
     for cell in cells:
         cdir = cell.directory(run_dir)
-        if is_done(cdir):
+        if RunDir(cdir).is_done():
             why = stale_reason(cell, cdir)
             if why is None:
                 result.skipped.append(cell.key)
@@ -212,7 +201,7 @@ def run_bench(
 
 
 def _prior_attempts(cdir: Path) -> int:
-    return len(read_failures(cdir))
+    return len(RunDir(cdir).read_failures())
 
 
 def _settle(
@@ -249,7 +238,7 @@ def _run_inline(pending: list[Cell], run_dir: Path, result: BenchResult, bar, ma
 
 
 def _log_tail(cdir: Path, n: int = 40) -> str:
-    path = cdir / LOG_FILE
+    path = RunDir(cdir).log
     if not path.exists():
         return ""
     with contextlib.suppress(OSError):
@@ -269,7 +258,7 @@ def _start_worker(cell: Cell, cdir: Path, attempt: int, single_thread: bool, nic
         "sys_path": [p for p in sys.path if p],
     }
     cdir.mkdir(parents=True, exist_ok=True)
-    spec = cdir / ".worker.json"
+    spec = RunDir(cdir).worker
     write_atomic(spec, json.dumps(payload))
     env = dict(os.environ)
     pkg_root = str(Path(__file__).resolve().parents[2])  # so `-m d5rl.runner.worker` finds this d5rl
@@ -307,17 +296,17 @@ def _run_local(
                 proc, cell, attempt = item
                 cdir = cell.directory(run_dir)
                 code = proc.returncode
-                if code == EXIT_CODES["ok"] and is_done(cdir):
+                if code == EXIT_CODES["ok"] and RunDir(cdir).is_done():
                     status, error = "ok", None
                 elif code == EXIT_CODES["busy"]:
                     status, error = "busy", None
                 elif code == EXIT_CODES["failed"]:
-                    fails = read_failures(cdir)
+                    fails = RunDir(cdir).read_failures()
                     status, error = "failed", (fails[-1]["error"] if fails else f"exit code {code}")
                 else:  # died before it could record anything (segfault, OOM kill, import error)
                     how = f"killed by signal {-code}" if code < 0 else f"exit code {code}"
                     error = f"worker process died ({how})"
-                    record_failure(cdir, attempt, error, "last lines of log.txt:\n" + _log_tail(cdir))
+                    record_failure(cdir, attempt, error, f"last lines of {RunDir(cdir).log.name}:\n" + _log_tail(cdir))
                     status = "failed"
                 _settle(cell, status, error, result, bar, queue, tries, max_attempts)
     finally:
@@ -373,9 +362,11 @@ def _run_ray(
                     status, error = out["status"], out.get("error")
                 except Exception as e:  # noqa: BLE001 - worker crash, node loss, unpicklable result
                     error = f"Ray task failed: {type(e).__name__}: {str(e).splitlines()[0] if str(e) else ''}"
-                    record_failure(cdir, attempt, error, f"{e}\n\nlast lines of log.txt:\n{_log_tail(cdir)}")
+                    record_failure(
+                        cdir, attempt, error, f"{e}\n\nlast lines of {RunDir(cdir).log.name}:\n{_log_tail(cdir)}"
+                    )
                     status = "failed"
-                if status == "ok" and not is_done(cdir):  # the cell dir is not shared with this machine
+                if status == "ok" and not RunDir(cdir).is_done():  # the cell dir is not shared with this machine
                     status, error = "failed", f"no done marker in {cdir}: is the run directory on a shared filesystem?"
                 _settle(cell, status, error, result, bar, queue, tries, max_attempts)
     finally:

@@ -8,6 +8,7 @@ import json
 import sys
 
 from d5rl.errors import D5RLError
+from d5rl.training.rundir import RunDir
 
 
 def resolve_tasks(names: list[str]) -> list[str]:
@@ -174,11 +175,10 @@ def cmd_bench(args) -> int:
 
 def _cell_status(cell, run_dir) -> str:
     """ "done", "stale: <why>" (finished on data the task no longer has: it would run again) or "to run"."""
-    from d5rl.runner.execute import is_done
     from d5rl.runner.grid import stale_reason
 
     cdir = cell.directory(run_dir)
-    if not is_done(cdir):
+    if not RunDir(cdir).is_done():
         return "to run"
     why = stale_reason(cell, cdir)
     return "done" if why is None else f"stale: {why}"
@@ -190,16 +190,7 @@ def _resolved_summary(cell, job: str) -> str:
 
     if job != DEFAULT_JOB:
         return f"{cell.overrides} {cell.protocol}"
-    from d5rl.settings import resolve
-
-    r = resolve(
-        cell.algo,
-        cell.task,
-        {**cell.protocol, **cell.overrides},
-        offline_steps=cell.offline_steps,
-        online_steps=cell.online_steps,
-        tuned=cell.tuned,
-    )
+    r = cell.spec()
     return json.dumps({"agent": r.agent.to_dict(), "train": r.train.to_dict()}, sort_keys=True)
 
 

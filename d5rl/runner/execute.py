@@ -17,7 +17,6 @@
 from __future__ import annotations
 
 import contextlib
-import json
 import os
 import shutil
 import socket
@@ -26,37 +25,15 @@ import time
 import traceback
 from pathlib import Path
 
-from d5rl.files import read_bytes, try_lock, write_atomic
-from d5rl.runner.grid import CELL_FILE, DONE_FILE, ERROR_FILE, FAILURES_FILE, LOCK_FILE, LOG_FILE, RUNNER_FILES, Cell
-
-
-def write_cell_file(cell: Cell, cell_dir: Path) -> None:
-    cell_dir.mkdir(parents=True, exist_ok=True)
-    write_atomic(cell_dir / CELL_FILE, json.dumps(cell.to_json(), indent=2, sort_keys=True) + "\n")
-
-
-FAILURES_MAX_BYTES = 64 << 20  # a record is a few kB (its traceback); a cell fails a handful of times
-
-
-def read_failures(cell_dir: Path) -> list[dict]:
-    path = Path(cell_dir) / FAILURES_FILE
-    if not path.exists():
-        return []
-    out = []
-    for line in read_bytes(path, FAILURES_MAX_BYTES, "failure log").decode(errors="replace").splitlines():
-        if line.strip():
-            with contextlib.suppress(json.JSONDecodeError):
-                out.append(json.loads(line))
-    return out
-
-
-def is_done(cell_dir: Path) -> bool:
-    return (Path(cell_dir) / DONE_FILE).exists()
+from d5rl.files import try_lock
+from d5rl.registry import resolve
+from d5rl.runner.grid import Cell
+from d5rl.training.rundir import RUNNER_FILES, RunDir
 
 
 def _cell_lock(cell_dir: Path):
     """Exclusive, non-blocking lock; yields False if another process holds it."""
-    return try_lock(cell_dir / LOCK_FILE)
+    return try_lock(RunDir(cell_dir).cell_lock)
 
 
 @contextlib.contextmanager
@@ -94,7 +71,7 @@ def clear_job_outputs(cell_dir: Path) -> None:
 def reset_cell(cell_dir: Path) -> None:
     """Make a finished cell unfinished and empty (its results describe data the task no longer has): the
     ``done`` marker and the job's outputs go; the runner's log and failure records stay."""
-    (Path(cell_dir) / DONE_FILE).unlink(missing_ok=True)
+    RunDir(cell_dir).done.unlink(missing_ok=True)
     clear_job_outputs(Path(cell_dir))
 
 
@@ -108,9 +85,7 @@ def record_failure(cell_dir: Path, attempt: int, error: str, tb: str, wall_s: fl
         "time": time.strftime("%Y-%m-%dT%H:%M:%S%z"),
         "wall_s": wall_s,
     }
-    with open(cell_dir / FAILURES_FILE, "a") as f:
-        f.write(json.dumps(rec) + "\n")
-    write_atomic(cell_dir / ERROR_FILE, f"attempt {attempt}: {error}\n\n{tb}")
+    RunDir(cell_dir).add_failure(rec, f"attempt {attempt}: {error}\n\n{tb}")
     return rec
 
 
@@ -122,15 +97,13 @@ def attempt_header(key: str) -> str:
 def execute_cell(cell_json: dict, cell_dir: str, attempt: int = 1, capture_output: bool = True) -> dict:
     """Run one cell; returns ``{"status": "ok"|"failed"|"skipped"|"busy", ...}``.  Never raises
     for a failing job (the failure is recorded in the cell directory)."""
-    from d5rl.registry import resolve
-
     cell = Cell.from_json(cell_json)
     cdir = Path(cell_dir)
     cdir.mkdir(parents=True, exist_ok=True)
     with _cell_lock(cdir) as locked:
         if not locked:
             return {"status": "busy", "key": cell.key}
-        if is_done(cdir):
+        if RunDir(cdir).is_done():
             return {"status": "skipped", "key": cell.key}
         try:
             job = resolve(cell.job)
@@ -139,7 +112,7 @@ def execute_cell(cell_json: dict, cell_dir: str, attempt: int = 1, capture_outpu
         if not getattr(job, "resumable", False):
             clear_job_outputs(cdir)  # a fresh attempt must not mix with a half-written one
         start = time.time()
-        redirect = _redirect_output(cdir / LOG_FILE) if capture_output else contextlib.nullcontext()
+        redirect = _redirect_output(RunDir(cdir).log) if capture_output else contextlib.nullcontext()
         try:
             with redirect:
                 print(
@@ -165,7 +138,7 @@ def execute_cell(cell_json: dict, cell_dir: str, attempt: int = 1, capture_outpu
             "finished": time.strftime("%Y-%m-%dT%H:%M:%S%z"),
             "summary": summary if isinstance(summary, dict) else None,
         }
-        write_atomic(cdir / DONE_FILE, json.dumps(done, indent=2, default=str) + "\n")
+        RunDir(cdir).write_done(done)
         return {"status": "ok", "key": cell.key, "wall_s": wall}
 
 

@@ -1,53 +1,33 @@
 """The benchmark grid: cells (task × algorithm × seed), their directories and tuned settings.
 
-A run directory holds one directory per cell::
+A grid's directory holds one run directory per cell, at ``<task>/<algo>/seed<k>/``, and the log of the grid's
+launches (the files of both: :mod:`d5rl.training.rundir`).
 
-    RUN_DIR/
-      bench.json                      # the grids launched into this directory (appended)
-      <task>/<algo>/seed<k>/
-        cell.json                     # what this cell runs (task, algo, seed, steps, overrides, job)
-        done                          # written atomically after success (JSON summary)
-        failures.jsonl                # one line per failed attempt: error + traceback
-        error.txt                     # traceback of the latest failure
-        log.txt                       # the job's stdout/stderr
-        ...                           # whatever the trainer writes (config, eval logs, checkpoints)
-
-A cell records only what the user chose (``--set`` values, protocol flags, ``tuned``); the
-trainer resolves everything else with :func:`d5rl.settings.resolve`, exactly as ``d5rl train``
-does for the same task and algorithm.
+A cell records only what the user chose (``--set`` values, protocol flags, ``tuned``); :meth:`Cell.spec`
+resolves everything else with :func:`d5rl.settings.resolve`, exactly as ``d5rl train`` does for the same
+task and algorithm.
 """
 
 from __future__ import annotations
 
 import dataclasses
 import itertools
-import json
 from collections.abc import Iterable
 from pathlib import Path
 
+from d5rl.agents import canonical_name as canonical_algo
+from d5rl.agents import get_agent
 from d5rl.errors import D5RLError
 from d5rl.files import read_json
+from d5rl.settings import resolve, run_steps
+from d5rl.training.config import EXECUTION_KEYS, RunSpec
+from d5rl.training.rundir import CELL, RunDir
 
 DEFAULT_JOB = "d5rl.runner.jobs:train_job"
-CELL_FILE = "cell.json"
-DONE_FILE = "done"
-FAILURES_FILE = "failures.jsonl"
-ERROR_FILE = "error.txt"
-LOG_FILE = "log.txt"
-LOCK_FILE = ".lock"
-CONFIG_FILE = "config.json"  # the job's (d5rl's trainer: resolved settings and the dataset it trained on)
-WORKER_FILE = ".worker.json"
-# Files the runner owns in a cell directory; everything else belongs to the job
-# and is cleared before a fresh attempt (a half-written eval log must not mix
-# with the next attempt's).
-RUNNER_FILES = frozenset({CELL_FILE, DONE_FILE, FAILURES_FILE, ERROR_FILE, LOG_FILE, LOCK_FILE, WORKER_FILE})
 
 
 class GridError(D5RLError, ValueError):
     """A grid that cannot run: unknown algorithm, clash with finished cells, bad tuned file."""
-
-
-from d5rl.agents import canonical_name as canonical_algo  # noqa: E402  (one canonicalizer)
 
 
 @dataclasses.dataclass(frozen=True)
@@ -74,6 +54,19 @@ class Cell:
     def to_json(self) -> dict:
         return dataclasses.asdict(self)
 
+    def spec(self) -> RunSpec:
+        """The run spec d5rl's trainer runs this cell with: the settings file (unless ``tuned`` is off) under the
+        cell's protocol flags and ``--set`` values, with the progress bar off (the grid shows its own)."""
+        return resolve(
+            self.algo,
+            self.task,
+            {"progress": False, **self.protocol, **self.overrides},
+            offline_steps=self.offline_steps,
+            online_steps=self.online_steps,
+            seed=self.seed,
+            tuned=self.tuned,
+        )
+
     @classmethod
     def from_json(cls, d: dict) -> Cell:
         fields = {f.name for f in dataclasses.fields(cls)}
@@ -84,7 +77,6 @@ def same_run(a: Cell, b: Cell) -> bool:
     """Whether two cells compute the same thing: equal but for ``--set`` values of the trainer's
     execution-only settings (:data:`d5rl.training.config.EXECUTION_KEYS`: checkpoints, RAM,
     evaluation envs and processes, progress)."""
-    from d5rl.training.config import EXECUTION_KEYS
 
     def what(c: Cell) -> dict:
         return {**c.to_json(), "overrides": {k: v for k, v in c.overrides.items() if k not in EXECUTION_KEYS}}
@@ -122,8 +114,6 @@ def expand_grid(
         algo = canonical_algo(algo)
         offline, online = int(offline_steps), int(online_steps)
         if job == DEFAULT_JOB:
-            from d5rl.settings import run_steps
-
             offline, online = run_steps(algo, offline, online)
         cells.append(
             Cell(
@@ -146,7 +136,7 @@ def expand_grid(
 
 
 def read_cell(cell_dir: Path) -> Cell | None:
-    path = Path(cell_dir) / CELL_FILE
+    path = RunDir(cell_dir).cell
     if not path.exists():
         return None
     return Cell.from_json(
@@ -159,7 +149,7 @@ def read_cell(cell_dir: Path) -> Cell | None:
 def find_cells(run_dir: Path | str) -> list[tuple[Cell, Path]]:
     """Every cell directory under ``run_dir`` (those with a ``cell.json``), sorted by key."""
     out = []
-    for path in sorted(Path(run_dir).glob(f"*/*/seed*/{CELL_FILE}")):
+    for path in sorted(Path(run_dir).glob(f"*/*/seed*/{CELL}")):
         cell = read_cell(path.parent)
         if cell is not None:
             out.append((cell, path.parent))
@@ -168,11 +158,7 @@ def find_cells(run_dir: Path | str) -> list[tuple[Cell, Path]]:
 
 def trained_on(cell_dir: Path) -> dict | None:
     """The dataset a cell's job recorded in its config.json (d5rl's trainer does), or None."""
-    path = Path(cell_dir) / CONFIG_FILE
-    try:
-        record = json.loads(path.read_text()).get("dataset")
-    except (OSError, ValueError, AttributeError):
-        return None
+    record = (RunDir(cell_dir).read_config_leniently() or {}).get("dataset")
     return record if isinstance(record, dict) else None
 
 
@@ -195,25 +181,12 @@ def stale_agent(cell: Cell, cell_dir: Path) -> str | None:
     agent default changed), compared with its ``config.json``; None when they agree or nothing was recorded."""
     if cell.job != DEFAULT_JOB:
         return None
-    try:
-        record = json.loads((Path(cell_dir) / CONFIG_FILE).read_text())
-    except (OSError, ValueError):
+    record = RunDir(cell_dir).read_config_leniently()
+    if record is None or not isinstance(record.get("agent"), dict):
         return None
-    if not isinstance(record, dict) or not isinstance(record.get("agent"), dict):
-        return None
-    from d5rl.agents import get_agent
-    from d5rl.settings import resolve
-
     try:
         now = get_agent(cell.algo)[0].version
-        resolved = resolve(
-            cell.algo,
-            cell.task,
-            {**cell.protocol, **cell.overrides},
-            offline_steps=cell.offline_steps,
-            online_steps=cell.online_steps,
-            tuned=cell.tuned,
-        )
+        resolved = cell.spec()
     except D5RLError:  # a task or algorithm this code no longer has: nothing to compare with
         return None
     was = record.get("agent_version", 1)

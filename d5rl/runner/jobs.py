@@ -16,29 +16,14 @@ from d5rl.runner.grid import Cell
 
 
 def train_job(cell: Cell, cell_dir: Path):
-    """Run :func:`d5rl.training.loop.train` for one cell.
-
-    The cell's protocol flags and ``--set`` values both go through the trainer's ``overrides`` (it
-    routes each key to the agent's or the loop's config, over the settings file's values, see
-    :mod:`d5rl.settings`); the progress bar is off (the sweep has its own).
-    """
+    """Run :func:`d5rl.training.loop.train` on the cell's run spec (:meth:`Cell.spec`) in ``cell_dir``."""
     try:
-        from d5rl.training.loop import train
+        from d5rl.training.loop import train  # the train extra (JAX): a grid of other jobs runs without it
     except ModuleNotFoundError as e:
         if e.name in ("jax", "flax", "optax"):
             raise MissingDependencyError(f"training needs {e.name}", "pip install 'd5rl[train]'") from e
         raise
-    overrides = {"progress": False, **cell.protocol, **cell.overrides}
-    summary = train(
-        cell.algo,
-        cell.task,
-        cell.offline_steps,
-        cell.online_steps,
-        cell.seed,
-        overrides,
-        Path(cell_dir),
-        tuned=cell.tuned,
-    )
+    summary = train(cell.spec(), Path(cell_dir))
     if not isinstance(summary, dict):
         return None
     return {k: v for k, v in summary.items() if isinstance(v, (int, float, str, bool, type(None)))}

@@ -20,7 +20,8 @@ import csv
 import math
 from pathlib import Path
 
-EVAL_FILES = ("eval.csv", "eval.jsonl", "metrics.jsonl", "metrics.csv")
+from d5rl.training.logger import read_rows
+from d5rl.training.rundir import RunDir
 
 
 def _score_key(row: dict, task: str | None) -> str | None:
@@ -40,22 +41,12 @@ def _num(v):
         return None
 
 
-def find_eval_file(cell_dir: Path) -> Path | None:
-    for name in EVAL_FILES:
-        p = Path(cell_dir) / name
-        if p.exists():
-            return p
-    return None
-
-
 def read_evals(cell_dir: Path, task: str | None = None, offline_steps: int | None = None) -> list[dict]:
     """Rows ``{"step": int, "phase": str, "score": float, "return": float|None}`` sorted by step."""
-    path = find_eval_file(cell_dir)
+    path = RunDir(cell_dir).eval_file()
     if path is None:
         return []
     if path.suffix == ".jsonl":
-        from d5rl.training.logger import read_rows
-
         raw = read_rows(path)  # bounded, and a damaged line is one error naming it
     else:
         with open(path, newline="") as f:

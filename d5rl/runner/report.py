@@ -37,9 +37,10 @@ import numpy as np
 
 from d5rl.errors import D5RLError, is_int
 from d5rl.runner import stats
-from d5rl.runner.execute import attempt_header, is_done, read_failures
-from d5rl.runner.grid import DONE_FILE, LOG_FILE, find_cells, stale_reason, trained_on
+from d5rl.runner.execute import attempt_header
+from d5rl.runner.grid import find_cells, stale_reason, trained_on
 from d5rl.runner.logs import final_scores, read_evals
+from d5rl.training.rundir import RunDir
 
 # Paper order and display names; algorithms outside this list follow in alphabetical order.
 METHODS = {
@@ -144,12 +145,13 @@ def collect(run_dir: Path | str) -> list[CellResult]:
         if cell.online_steps <= 0:
             final.pop("online", None)
         videos = sorted(p for p in cdir.rglob("*") if p.suffix.lower() in VIDEO_EXTS)
-        done = is_done(cdir)
-        marker = _read_json(cdir / DONE_FILE) if done else {}
+        files = RunDir(cdir)
+        done = files.is_done()
+        marker = _read_json(files.done) if done else {}
         summary = marker.get("summary") or {}
         wall, partial = summary.get("run_wall_s"), False
         if wall is None and marker.get("wall_s") is not None:  # older runs: the last process's time only
-            wall, partial = marker["wall_s"], _processes(cdir / LOG_FILE, cell.key) > 1
+            wall, partial = marker["wall_s"], _processes(files.log, cell.key) > 1
         out.append(
             CellResult(
                 cell.task,
@@ -161,14 +163,14 @@ def collect(run_dir: Path | str) -> list[CellResult]:
                 done,
                 rows,
                 final,
-                len(read_failures(cdir)),
+                len(files.read_failures()),
                 videos,
                 stale=stale_reason(cell, cdir) if done else None,
                 data=trained_on(cdir),
                 wall_s=wall,
                 wall_is_last_process=partial,
                 eval_episodes=summary.get("episodes"),
-                stats=_read_json(cdir / "summary.json").get("stats") if done else None,
+                stats=_read_json(files.summary).get("stats") if done else None,
             )
         )
     return out
@@ -765,8 +767,8 @@ def write_report(
     if incomplete:
         parts += ["## Unfinished cells", "", "| Cell | Failed attempts | Error |", "|---|---|---|"]
         for r in incomplete:
-            err = r.directory / "error.txt"
-            link = f"[error.txt]({os.path.relpath(err, out)})" if err.exists() else "not run yet / running"
+            err = RunDir(r.directory).error
+            link = f"[{err.name}]({os.path.relpath(err, out)})" if err.exists() else "not run yet / running"
             parts.append(f"| {r.task}/{r.algo}/seed{r.seed} | {r.failures} | {link} |")
         parts.append("")
     videos = [(r, v) for r in results for v in r.videos[-VIDEOS_PER_CELL:]]  # the latest (final policy) videos

@@ -18,6 +18,7 @@ from pathlib import Path
 import numpy as np
 
 from d5rl.rollout import Step, rollout
+from d5rl.training.rundir import RunDir
 from d5rl.video import write_gif
 
 GIF_SIZE = (120, 160)  # (height, width) of the frames
@@ -95,8 +96,6 @@ def typical_rollout(cell_dir: Path, task: str, *, episodes: int = 5, size=GIF_SI
 def write_rollout_gifs(results, out_dir: Path, log=print) -> dict[str, str]:
     """``{task: caption}`` for every GIF under ``out_dir/videos`` after writing the ones it can (see the
     module docstring).  A caption names the cell and the episode's score."""
-    from d5rl.training.checkpoint import LATEST
-
     videos = Path(out_dir) / "videos"
     captions = read_captions(videos)
     for task in sorted({r.task for r in results}):
@@ -104,7 +103,7 @@ def write_rollout_gifs(results, out_dir: Path, log=print) -> dict[str, str]:
         for cell in ranked_cells(results, task):
             if shown is not None and shown.startswith(_cell_label(cell) + ";"):
                 break  # the GIF already shows this cell, better than any whose checkpoint is here: keep it
-            if not (cell.directory / LATEST).exists():
+            if not RunDir(cell.directory).checkpoint.exists():
                 continue
             frames, fps, seed, scores = typical_rollout(cell.directory, task)
             write_gif(videos / f"{task}.gif", frames, fps)

@@ -32,12 +32,10 @@ import numpy as np
 
 from d5rl.errors import D5RLError, is_int
 from d5rl.files import json_type_error, read_bytes, read_json, read_npz
+from d5rl.training.rundir import CHECKPOINT_TMP_PREFIX, RunDir
 
 FORMAT_VERSION = 1
-LATEST, PREVIOUS = "checkpoint", "checkpoint.prev"
-TMP_PREFIX = ".checkpoint.tmp-"  # a checkpoint being written: .checkpoint.tmp-<pid>
 MANIFEST = "manifest.json"
-RUN_LOCK = ".train.lock"  # held by the process training into a run directory (d5rl.training.loop)
 
 
 class CheckpointError(D5RLError):
@@ -72,9 +70,9 @@ def _fsync_dir(path: Path) -> None:
 def save_checkpoint(run_dir: str | Path, ckpt: Checkpoint) -> Path:
     """Write ``run_dir/checkpoint`` atomically, keeping the one before as ``checkpoint.prev``."""
     run_dir = Path(run_dir)
-    for stale in run_dir.glob(f"{TMP_PREFIX}*"):  # a killed writer's leftovers
+    for stale in run_dir.glob(f"{CHECKPOINT_TMP_PREFIX}*"):  # a killed writer's leftovers
         shutil.rmtree(stale, ignore_errors=True)
-    tmp = run_dir / f"{TMP_PREFIX}{os.getpid()}"
+    tmp = RunDir(run_dir).checkpoint_tmp(os.getpid())
     tmp.mkdir(parents=True)
     files = {
         "agent.msgpack": bytes(ckpt.agent),
@@ -95,7 +93,7 @@ def save_checkpoint(run_dir: str | Path, ckpt: Checkpoint) -> Path:
             f.flush()
             os.fsync(f.fileno())
     _fsync_dir(tmp)
-    latest, previous = run_dir / LATEST, run_dir / PREVIOUS
+    latest, previous = RunDir(run_dir).checkpoint, RunDir(run_dir).previous_checkpoint
     if latest.exists():
         shutil.rmtree(previous, ignore_errors=True)
         latest.rename(previous)
@@ -217,8 +215,7 @@ def load_checkpoint(run_dir: str | Path, warn=None) -> Checkpoint | None:
     run_dir = Path(run_dir)
     warn = warn or (lambda msg: print(f"warning: {msg}", file=sys.stderr))
     first_error: CheckpointError | None = None
-    for name in (LATEST, PREVIOUS):
-        path = run_dir / name
+    for path in (RunDir(run_dir).checkpoint, RunDir(run_dir).previous_checkpoint):
         if not path.exists():
             continue
         try:

@@ -1,8 +1,10 @@
-"""The training loop's settings: one typed source of defaults, their bounds, and the routing of
-``--set key=value`` values to the agent's or the loop's config.  (Per-task values: :mod:`d5rl.settings`.)"""
+"""The training loop's settings: one typed source of defaults, their bounds, the routing of ``--set key=value``
+values to the agent's or the loop's config, and :class:`RunSpec`, everything one run is configured by.
+(Per-task values, and the resolver that makes a run spec from them: :mod:`d5rl.settings`.)"""
 
 from __future__ import annotations
 
+import dataclasses
 from collections.abc import Mapping
 
 from d5rl.agents.config import Bound, Config, ConfigError
@@ -60,6 +62,32 @@ TRAIN_BOUNDS = {
     "dataset_episodes": Bound(int, ge=1, optional=True),
     "dataset_in_memory_gb": Bound(float, ge=0, optional=True),
 }
+
+
+@dataclasses.dataclass(frozen=True)
+class RunSpec:
+    """Everything one run is configured by, resolved once (:func:`d5rl.settings.resolve`) and passed whole to
+    :func:`d5rl.training.loop.train`; ``d5rl train --show-config`` prints :meth:`to_json` of the same object, and
+    the run's ``config.json`` starts with it."""
+
+    algo: str  # the agent's canonical name
+    task_id: str
+    agent: Config  # the agent's settings (the trainer fills the values it takes from the data)
+    train: Config  # the training loop's settings (get_train_config)
+    offline_steps: int
+    online_steps: int
+    seed: int = 0
+
+    def to_json(self) -> dict:
+        return {
+            "algo": self.algo,
+            "task_id": self.task_id,
+            "offline_steps": self.offline_steps,
+            "online_steps": self.online_steps,
+            "agent": self.agent.to_dict(),
+            "train": self.train.to_dict(),
+            "seed": self.seed,
+        }
 
 
 def check_run(offline_steps, online_steps, seed) -> None:

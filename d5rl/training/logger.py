@@ -10,6 +10,7 @@ from typing import Any
 
 from d5rl.errors import D5RLError
 from d5rl.files import read_bytes
+from d5rl.training.rundir import RunDir
 
 METRICS_MAX_BYTES = 1 << 30  # a million-step run logging every 100 steps writes ~50 MB
 
@@ -55,13 +56,12 @@ class Logger:
     def __init__(self, run_dir: str | Path, tensorboard: bool = True):
         self.dir = Path(run_dir)
         self.dir.mkdir(parents=True, exist_ok=True)
-        self.jsonl = self.dir / "metrics.jsonl"
-        self.csv = self.dir / "metrics.csv"
+        self.jsonl, self.csv = RunDir(self.dir).metrics_jsonl, RunDir(self.dir).metrics_csv
         self.rows = []
         if self.jsonl.exists():
             self.rows = read_rows(self.jsonl)
         self.columns = sorted({k for r in self.rows for k in r} - {"step"})
-        self.tb = _tb_writer(self.dir / "tb") if tensorboard else None
+        self.tb = _tb_writer(RunDir(self.dir).tensorboard) if tensorboard else None
 
     def truncate_after(self, step: int) -> None:
         self.rows = [r for r in self.rows if r["step"] <= step]

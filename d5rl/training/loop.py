@@ -1,14 +1,8 @@
 """The training loop: offline training, optional online fine-tuning, evaluation,
 logging and checkpoints that resume exactly.
 
-A run lives in one directory::
-
-    run_dir/config.json       resolved agent + training config (written before training)
-    run_dir/metrics.jsonl     one row per log / evaluation step (also metrics.csv, tb/ if TensorBoard)
-    run_dir/checkpoint/       agent, optimizer, RNG states, replay buffer, step (atomic, checksummed;
-                              the previous one is kept: see d5rl/training/checkpoint.py)
-    run_dir/summary.json      final evaluation
-    run_dir/videos/           evaluation videos (``save_video=True``)
+A run lives in one directory, whose files :class:`d5rl.training.rundir.RunDir` names, reads and writes: its
+config, metrics, checkpoints (atomic and checksummed; the previous one is kept), final summary and videos.
 
 :func:`train` reads top to bottom: resolve the settings, load the data, build (or restore) the
 agent, run the offline phase, the online phase, the final evaluation.  What differs between
@@ -20,8 +14,6 @@ interrupted (offline checkpoints fall on update boundaries, online ones on episo
 from __future__ import annotations
 
 import dataclasses
-import json
-from collections.abc import Iterable, Mapping
 from pathlib import Path
 from typing import Any
 
@@ -32,21 +24,17 @@ from d5rl.agents import get_agent
 from d5rl.agents.config import Config
 from d5rl.agents.encoders import is_pixel_obs
 from d5rl.datasets.dataset import mc_tail
-from d5rl.errors import D5RLError, is_int
-from d5rl.files import json_type_error, lock_holder, read_json, try_lock
+from d5rl.files import lock_holder, try_lock
 from d5rl.progress import progress_bar
-from d5rl.training.checkpoint import RUN_LOCK, Checkpoint, check_state, load_checkpoint, restore_agent, save_checkpoint
-from d5rl.training.config import check_run
+from d5rl.training.checkpoint import Checkpoint, check_state, load_checkpoint, restore_agent, save_checkpoint
+from d5rl.training.config import RunSpec, check_run
 from d5rl.training.envs import load_task_dataset, make_task_env
 from d5rl.training.logger import Logger
 from d5rl.training.parts import Evaluator, Metrics, NonFiniteLossError, Prefetcher, RunState, Sampler, as_batch, crossed
 from d5rl.training.replay import ReplayBuffer
+from d5rl.training.rundir import RunDir, RunDirError
 
 __all__ = ["NonFiniteLossError", "RunDirError", "load_run", "train"]
-
-
-class RunDirError(D5RLError):
-    """A run directory that holds a different run."""
 
 
 def default_run_dir(algo: str, task_id: str, seed: int) -> Path:
@@ -95,64 +83,35 @@ class Run:
 
 
 # --- the loop ----------------------------------------------------------------------------------------------
-def train(
-    algo: str,
-    task_id: str,
-    offline_steps: int = 0,
-    online_steps: int = 0,
-    seed: int = 0,
-    overrides: Iterable[str] | Mapping[str, Any] | None = None,
-    run_dir: str | Path | None = None,
-    *,
-    dataset=None,
-    tuned: bool = True,
-) -> dict[str, Any]:
-    """Train ``algo`` on ``task_id``; returns the final evaluation (also in ``summary.json``).
+def train(spec: RunSpec, run_dir: str | Path | None = None, *, dataset=None) -> dict[str, Any]:
+    """Train the run ``spec`` describes (:func:`d5rl.settings.resolve` makes it); returns the final evaluation
+    (also in ``summary.json``).
 
-    ``offline_steps`` gradient updates on the task's dataset, then ``online_steps``
-    environment steps with one update each, mixing the agent's share of offline data into
-    every batch.  ``overrides`` are ``key=value`` strings (or a dict) for the agent's or the
-    loop's config (:func:`d5rl.training.config.get_train_config`), layered over the task's
-    settings (:mod:`d5rl.settings`; ``tuned=False`` leaves them out).  ``dataset`` replaces the
-    task's dataset (tests).
+    ``spec.offline_steps`` gradient updates on the task's dataset, then ``spec.online_steps`` environment steps
+    with one update each, mixing the agent's share of offline data into every batch.  ``run_dir`` defaults to
+    ``runs/TASK/ALGO/seedS``; ``dataset`` replaces the task's dataset (tests).
     """
-    from d5rl.settings import resolve
-
-    check_run(offline_steps, online_steps, seed)
-    settings = resolve(algo, task_id, overrides, offline_steps=offline_steps, online_steps=online_steps, tuned=tuned)
-    cfg, agent_cls = settings.train, get_agent(settings.algo)[0]
-    run_dir = Path(run_dir) if run_dir is not None else default_run_dir(settings.algo, task_id, seed)
+    check_run(spec.offline_steps, spec.online_steps, spec.seed)
+    task_id, cfg, agent_cls = spec.task_id, spec.train, get_agent(spec.algo)[0]
+    run_dir = Path(run_dir) if run_dir is not None else default_run_dir(spec.algo, task_id, spec.seed)
     data_kw = {"episodes": cfg.dataset_episodes} if cfg.dataset_episodes else {}
     if cfg.dataset_in_memory_gb is not None:
         data_kw["memory_limit_bytes"] = int(cfg.dataset_in_memory_gb * 2**30)
     ds = dataset if dataset is not None else load_task_dataset(task_id, **data_kw)
-    agent_cfg = agent_cls.fit_config(settings.agent, ds)
+    agent_cfg = agent_cls.fit_config(spec.agent, ds)
     sampler = Sampler(ds, cfg.frame_stack, agent_cls.extra_batch_keys, agent_cfg.get("discount", 0.99))
     example = sampler.sample(1, np.random.default_rng(0))
     check_memory(agent_cfg, example)
     run_dir.mkdir(parents=True, exist_ok=True)
-    with try_lock(run_dir / RUN_LOCK) as locked:
+    with try_lock(RunDir(run_dir).train_lock) as locked:
         if not locked:  # two writers would delete each other's checkpoint temporaries and log every row twice
-            holder = lock_holder(run_dir / RUN_LOCK)
+            holder = lock_holder(RunDir(run_dir).train_lock)
             raise RunDirError(
                 f"another d5rl process{f' (pid {holder})' if holder else ''} is training into {run_dir}",
                 "wait for it to finish (a second run resumes from its checkpoint), or pick another --run-dir",
             )
         try:
-            return _train_locked(
-                settings,
-                cfg,
-                agent_cls,
-                agent_cfg,
-                sampler,
-                example,
-                task_id,
-                seed,
-                offline_steps,
-                online_steps,
-                run_dir,
-                ds,
-            )
+            return _train_locked(spec, agent_cls, agent_cfg, sampler, example, run_dir, ds)
         except OSError as e:
             from d5rl.datasets.format import disk_full_error
 
@@ -167,23 +126,21 @@ def train(
             raise
 
 
-def _train_locked(
-    settings, cfg, agent_cls, agent_cfg, sampler, example, task_id, seed, offline_steps, online_steps, run_dir, ds
-) -> dict[str, Any]:
+def _train_locked(spec: RunSpec, agent_cls, agent_cfg, sampler, example, run_dir: Path, ds) -> dict[str, Any]:
+    cfg, offline_steps, online_steps = spec.train, spec.offline_steps, spec.online_steps
     resume = load_checkpoint(run_dir)
     _write_config(
         run_dir,
-        settings,
+        spec,
         agent_cfg,
-        seed,
         resumed=resume is not None,
         dataset=_data_record(ds),
         agent_version=agent_cls.version,
     )
     logger = Logger(run_dir, tensorboard=cfg.tensorboard)
     run = Run(
-        task_id,
-        seed,
+        spec.task_id,
+        spec.seed,
         offline_steps,
         online_steps,
         run_dir,
@@ -194,7 +151,7 @@ def _train_locked(
         example,
         is_pixel_obs(example["observations"]),
         logger,
-        Evaluator(task_id, seed, cfg.frame_stack, cfg, logger, run_dir),
+        Evaluator(spec.task_id, spec.seed, cfg.frame_stack, cfg, logger, RunDir(run_dir)),
         progress_bar(
             total=offline_steps + online_steps,
             unit="step",
@@ -219,7 +176,7 @@ def _train_locked(
             "run_wall_s": round(state.elapsed(), 1),
             "resumed": resume is not None,
         }
-        (run_dir / "summary.json").write_text(json.dumps(summary, indent=2) + "\n")
+        RunDir(run_dir).write_summary(summary)
         return {**summary, "agent": agent}
     finally:
         run.bar.close()
@@ -281,11 +238,8 @@ def _finished_summary(run_dir: Path, step: int, total: int) -> dict | None:
     """The ``summary.json`` of a run that resumed at its last step after its final evaluation, else None."""
     if step < total:
         return None
-    try:
-        summary = read_json(run_dir / "summary.json", "run summary", error=RunDirError)
-    except (FileNotFoundError, RunDirError):
-        return None
-    return summary if isinstance(summary, dict) and summary.get("step") == step else None
+    summary = RunDir(run_dir).read_summary()
+    return summary if summary is not None and summary.get("step") == step else None
 
 
 def _data_record(ds) -> dict | None:
@@ -302,9 +256,8 @@ def _data_record(ds) -> dict | None:
 
 def _write_config(
     run_dir: Path,
-    settings,
+    spec: RunSpec,
     agent_cfg: Config,
-    seed: int,
     resumed: bool,
     dataset: dict | None = None,
     agent_version: int = 1,
@@ -313,15 +266,14 @@ def _write_config(
     code (reports use both to tell results of older data or older agents apart); a resumed run must be the
     same run on the same data."""
     resolved = {
-        **settings.to_json(),
-        "seed": seed,
+        **spec.to_json(),
         "agent": agent_cfg.to_dict(),
         "agent_version": agent_version,
         **({"dataset": dataset} if dataset is not None else {}),
     }
-    path = run_dir / "config.json"
-    if resumed and path.exists():
-        old = read_run_config(run_dir)
+    files = RunDir(run_dir)
+    if resumed and files.config.exists():
+        old = files.read_config()
         keys = ("algo", "task_id", "seed", "agent")
         if {k: old.get(k) for k in keys} != {k: resolved[k] for k in keys} or old.get(
             "agent_version", 1
@@ -335,7 +287,7 @@ def _write_config(
                 f"{run_dir} holds a run trained on other data ({old['dataset']}); this one loads {dataset}",
                 "pick another --run-dir, or delete that directory to start over",
             )
-    path.write_text(json.dumps(resolved, indent=2) + "\n")
+    files.write_config(resolved)
 
 
 def _start(run: Run, resume: Checkpoint | None) -> tuple[Any, RunState]:
@@ -449,37 +401,10 @@ def online_phase(run: Run, agent, state: RunState):
     return agent
 
 
-def read_run_config(run_dir: Path) -> dict:
-    """A run's ``config.json`` with the fields a resumed run and ``d5rl eval`` use, type-checked (one line if not)."""
-    path = Path(run_dir) / "config.json"
-    hint = "pass the directory a `d5rl train` run wrote, or train again in a new --run-dir"
-    cfg = read_json(path, "run config", error=RunDirError, hint=hint)
-    checks = (
-        ("algo", lambda v: isinstance(v, str), "an algorithm name"),
-        ("task_id", lambda v: isinstance(v, str), "a task id"),
-        ("seed", lambda v: is_int(v, lo=0), "a non-negative integer"),
-        ("agent", lambda v: isinstance(v, dict), "an object of agent settings"),
-        (
-            "train",
-            lambda v: isinstance(v, dict) and is_int(v.get("frame_stack"), lo=1),
-            "an object of training settings with frame_stack",
-        ),
-    )
-    if not isinstance(cfg, dict):
-        raise json_type_error("run config", path, "the file", cfg, "a JSON object", RunDirError, hint)
-    for key, ok, expected in checks:
-        if not ok(cfg.get(key)):
-            raise json_type_error("run config", path, key, cfg.get(key), expected, RunDirError, hint)
-    return cfg
-
-
 def load_run(run_dir: str | Path):
     """``(agent, resolved_config)`` from a run directory's config and latest checkpoint."""
     run_dir = Path(run_dir)
-    config_path = run_dir / "config.json"
-    if not config_path.exists():
-        raise RunDirError(f"{run_dir} has no config.json", "pass the directory a `d5rl train` run wrote")
-    resolved = read_run_config(run_dir)
+    resolved = RunDir(run_dir).read_config()
     ckpt = load_checkpoint(run_dir)
     if ckpt is None:
         raise RunDirError(f"{run_dir} has no checkpoint yet", "wait for the first checkpoint or train longer")

@@ -10,7 +10,6 @@ import hashlib
 import math
 import time
 from concurrent.futures import ThreadPoolExecutor
-from pathlib import Path
 from typing import Any
 
 import jax
@@ -20,10 +19,10 @@ from d5rl.errors import D5RLError
 from d5rl.training.evaluation import EvalProgress, evaluate
 from d5rl.training.logger import Logger
 from d5rl.training.replay import ReplayBuffer
+from d5rl.training.rundir import RunDir
 
 BATCH_KEYS = ("observations", "actions", "rewards", "masks", "next_observations")
 FLOAT_KEYS = ("rewards", "masks", "mc_returns", "next_actions")
-EVAL_PROGRESS_FILE = "eval_progress.json"  # the episodes an unfinished evaluation has done (see EvalProgress)
 
 
 class NonFiniteLossError(D5RLError, FloatingPointError):
@@ -192,7 +191,7 @@ class Evaluator:
     """Evaluates the agent on the task and logs ``eval/<task>/{return, return_std, length, success, score}`` and
     the task's episode statistics (``eval/<task>/subtask/microwave``, ...)."""
 
-    def __init__(self, task_id: str, seed: int, frame_stack: int, cfg, logger: Logger, run_dir: Path):
+    def __init__(self, task_id: str, seed: int, frame_stack: int, cfg, logger: Logger, run_dir: RunDir):
         self.task_id, self.seed, self.frame_stack, self.cfg = task_id, seed, frame_stack, cfg
         self.logger, self.run_dir = logger, run_dir
 
@@ -200,12 +199,10 @@ class Evaluator:
         """Evaluate ``agent`` at ``state.step``; an evaluation resumed from an earlier process adds that process's
         time on it to the run's wall time (``state.elapsed_before``)."""
         step = state.step
-        video = self.run_dir / "videos" / f"step{step:09d}.mp4" if self.cfg.save_video else None
+        video = self.run_dir.video(step) if self.cfg.save_video else None
         # a kill mid-evaluation loses at most one batch of episodes: the rerun of this step's evaluation, on the
         # same agent, resumes from the file (a 100-episode IDQL evaluation is an hour of CPU)
-        progress = EvalProgress(
-            self.run_dir / EVAL_PROGRESS_FILE, {"step": int(step), "agent_sha256": fingerprint(agent)}
-        )
+        progress = EvalProgress(self.run_dir.eval_progress, {"step": int(step), "agent_sha256": fingerprint(agent)})
         res = evaluate(
             agent,
             self.task_id,

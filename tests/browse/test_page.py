@@ -159,13 +159,13 @@ def runs_page(tmp_path, run_dirs):
 def _grid(root: Path, cells) -> Path:
     """A grid of a1-walk-v0 cells: ``cells`` is ``[(algo, seed, [score of each evaluation])]``, evaluated
     every 50 of 100 steps from the end back."""
-    from d5rl.runner.execute import write_cell_file
     from d5rl.runner.grid import Cell
+    from d5rl.training.rundir import RunDir
 
     for algo, seed, scores in cells:
         cell = Cell("a1-walk-v0", algo, seed, 100, 0)
         d = cell.directory(root)
-        write_cell_file(cell, d)
+        RunDir(d).write_cell(cell.to_json())
         steps = range(100 - 50 * (len(scores) - 1), 101, 50)
         (d / "metrics.jsonl").write_text(
             "".join(json.dumps({"step": st, "eval/a1-walk-v0/score": sc}) + "\n" for st, sc in zip(steps, scores))

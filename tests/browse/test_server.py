@@ -21,8 +21,8 @@ from d5rl.browse.server import create_app
 from d5rl.datasets.generation import generate
 from d5rl.datasets.loading import load_dataset
 from d5rl.registry import get_spec, normalize_score
-from d5rl.runner.execute import write_cell_file
 from d5rl.runner.grid import Cell
+from d5rl.training.rundir import RunDir
 from tests.browse import toy
 
 
@@ -151,7 +151,7 @@ def _run_dir(root: Path) -> Path:
     for seed, scores in ((0, [0.1, 0.5]), (1, [0.3, 0.7])):
         cell = Cell("toy-reach-v0", "bc", seed, 100, 0)
         d = cell.directory(root)
-        write_cell_file(cell, d)
+        RunDir(d).write_cell(cell.to_json())
         with open(d / "metrics.jsonl", "w") as f:
             for step, s in zip((50, 100), scores):
                 f.write(json.dumps({"step": step, "eval/toy-reach-v0/score": s}) + "\n")

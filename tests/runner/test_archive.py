@@ -6,7 +6,8 @@ pytest.importorskip("jax")
 
 from d5rl.runner import expand_grid, run_bench
 from d5rl.runner.archive import archive_files, main
-from d5rl.runner.grid import DEFAULT_JOB, DONE_FILE
+from d5rl.runner.grid import DEFAULT_JOB
+from d5rl.training.rundir import RunDir
 
 PROTOCOL = {"eval_interval": 16, "eval_episodes": 2, "hidden_dims": "16,16", "batch_size": "16"}
 
@@ -21,7 +22,7 @@ def test_results_always_come_then_the_best_then_unfinished_checkpoints(tmp_path,
     cells = expand_grid(["toy-reach-v0"], ["bc"], [0, 1, 2], 16, 0, job=DEFAULT_JOB, overrides=PROTOCOL)
     assert not run_bench(cells, run, workers=0, progress=False).failed
     unfinished = cells[2].directory(run)
-    (unfinished / DONE_FILE).unlink()  # as if the machine had stopped during its final evaluation
+    RunDir(unfinished).done.unlink()  # as if the machine had stopped during its final evaluation
     for c in cells:
         (c.directory(run) / ".lock").write_text("")
         (c.directory(run) / "checkpoint.prev").mkdir()

@@ -13,8 +13,9 @@ import numpy as np
 import pytest
 
 from d5rl.runner import expand_grid, run_bench, write_report
-from d5rl.runner.execute import _cell_lock, read_failures
+from d5rl.runner.execute import _cell_lock
 from d5rl.runner.grid import GridError, find_cells
+from d5rl.training.rundir import RunDir
 from tests.runner import toy
 
 REPO = Path(__file__).resolve().parents[2]
@@ -151,22 +152,22 @@ def test_failures_are_recorded_and_retried_once(tmp_path):
     assert set(result.failed) == {always, crash} and result.ok == [once]
     assert result.attempts == {always: 2, once: 2, crash: 2}
 
-    fails = read_failures(run_dir / always)
+    fails = RunDir(run_dir / always).read_failures()
     assert [f["attempt"] for f in fails] == [1, 2]
     assert all("injected failure" in f["error"] and "Traceback" in f["traceback"] for f in fails)
     assert "reach_job" in fails[0]["traceback"]
     assert "injected failure" in (run_dir / always / "error.txt").read_text()
     assert not (run_dir / always / "done").exists()
 
-    assert len(read_failures(run_dir / once)) == 1
+    assert len(RunDir(run_dir / once).read_failures()) == 1
     assert json.loads((run_dir / once / "done").read_text())["attempt"] == 2
 
-    crashes = read_failures(run_dir / crash)
+    crashes = RunDir(run_dir / crash).read_failures()
     assert len(crashes) == 2 and all("killed by signal 9" in f["error"] for f in crashes)
 
     # a later invocation retries unfinished cells again, numbering attempts on from the record
     result2 = run_bench(cells[:1], run_dir, workers=1, progress=False, max_attempts=1)
-    assert result2.failed and [f["attempt"] for f in read_failures(run_dir / always)] == [1, 2, 3]
+    assert result2.failed and [f["attempt"] for f in RunDir(run_dir / always).read_failures()] == [1, 2, 3]
 
 
 def test_report_lists_unfinished_cells(tmp_path):

@@ -7,8 +7,8 @@ from pathlib import Path
 import pytest
 
 from d5rl.runner import expand_grid, run_bench, write_report
-from d5rl.runner.execute import read_failures
 from d5rl.runner.grid import find_cells
+from d5rl.training.rundir import RunDir
 from tests.runner import toy
 
 ray = pytest.importorskip("ray", reason="ray is not installed (pip install ray) - the Ray backend is optional")
@@ -50,7 +50,7 @@ def test_ray_runs_the_tiny_grid(local_ray, tmp_path):
     wall = time.time() - t0
     assert not result.failed, result.summary()
     assert len(result.ok) == 9
-    assert result.attempts[flaky[0].key] == 2 and len(read_failures(flaky[0].directory(run_dir))) == 1
+    assert result.attempts[flaky[0].key] == 2 and len(RunDir(flaky[0].directory(run_dir)).read_failures()) == 1
     pids = set()
     for cell, cdir in find_cells(run_dir):
         done = json.loads((cdir / "done").read_text())

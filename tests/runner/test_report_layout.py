@@ -6,9 +6,9 @@ import json
 import numpy as np
 import pytest
 
-from d5rl.runner.execute import write_cell_file
 from d5rl.runner.grid import Cell
 from d5rl.runner.report import write_report
+from d5rl.training.rundir import RunDir
 
 TASKS = ["wx-sorting-v0", "a1-walk-v0", "kitchen-standard-mixed-v0", "kitchen-randomized-demos-v0", "a1-run-v0"]
 ALGOS = ["idql", "td3bc", "bc", "iql", "myalgo"]
@@ -21,7 +21,7 @@ def _fake_run(run_dir, rng):
             for seed in range(3):
                 cell = Cell(task, algo, seed, 100, 50 if algo != "bc" else 0)
                 cdir = cell.directory(run_dir)
-                write_cell_file(cell, cdir)
+                RunDir(cdir).write_cell(cell.to_json())
                 steps = [50, 100] + ([150] if cell.online_steps else [])
                 scores = rng.uniform(-0.2, 1.1, len(steps))
                 with open(cdir / "metrics.jsonl", "w") as f:  # the training loop's format
@@ -86,7 +86,7 @@ def test_a_task_the_paper_did_not_benchmark_keeps_its_row_next_to_the_papers(tmp
     for task, score in (("a1-walk-v0", 0.25), ("kitchen-randomized-suboptimal-state-v0", 0.5)):
         cell = Cell(task, "bc", 0, 100, 0)
         cdir = cell.directory(tmp_path)
-        write_cell_file(cell, cdir)
+        RunDir(cdir).write_cell(cell.to_json())
         (cdir / "metrics.jsonl").write_text(json.dumps({"step": 100, f"eval/{task}/score": score}) + "\n")
         (cdir / "done").write_text("{}")
     write_report(tmp_path, reps=50, plots=False)
@@ -97,7 +97,7 @@ def test_a_task_the_paper_did_not_benchmark_keeps_its_row_next_to_the_papers(tmp
     assert "| a1-walk-v0 | 0.250 ± 0.000 / 1.006 ± 0.015 |" in md
     only_toy = tmp_path / "toy"
     cell = Cell("toy-reach-v0", "bc", 0, 100, 0)
-    write_cell_file(cell, cell.directory(only_toy))
+    RunDir(cell.directory(only_toy)).write_cell(cell.to_json())
     (cell.directory(only_toy) / "metrics.jsonl").write_text(
         json.dumps({"step": 100, "eval/toy-reach-v0/score": 1.0}) + "\n"
     )
@@ -122,7 +122,7 @@ def test_wall_time_counts_every_process(tmp_path):
     for seed, (summary, processes) in enumerate([({"run_wall_s": 600.0, "episodes": 5}, 2), ({"episodes": 5}, 1)]):
         cell = Cell("a1-walk-v0", "bc", seed, 100, 0)
         cdir = cell.directory(tmp_path)
-        write_cell_file(cell, cdir)
+        RunDir(cdir).write_cell(cell.to_json())
         (cdir / "metrics.jsonl").write_text(json.dumps({"step": 100, "eval/a1-walk-v0/score": 0.5}) + "\n")
         headers = [f"=== {cell.key} attempt 1 on vm pid {i} at now\n" for i in range(processes)]
         (cdir / "log.txt").write_text("".join(headers))
@@ -145,7 +145,7 @@ def test_what_the_agents_do_from_their_episode_stats(tmp_path):
     ]:
         cell = Cell("kitchen-standard-mixed-state-v0", algo, seed, 100, 0)
         cdir = cell.directory(tmp_path)
-        write_cell_file(cell, cdir)
+        RunDir(cdir).write_cell(cell.to_json())
         (cdir / "metrics.jsonl").write_text(json.dumps({"step": 100, f"eval/{cell.task}/score": 0.5}) + "\n")
         (cdir / "done").write_text(json.dumps({"summary": {"episodes": 4}}))  # the job's summary keeps scalars only
         (cdir / "summary.json").write_text(json.dumps({"score": 0.5, **({"stats": stats} if stats else {})}))

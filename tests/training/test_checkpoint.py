@@ -12,6 +12,7 @@ import pytest
 
 from d5rl.datasets.dataset import Dataset
 from d5rl.envs.toy.data import toy_dataset
+from d5rl.settings import resolve
 from d5rl.training.checkpoint import Checkpoint, CheckpointError, load_checkpoint, read_checkpoint, save_checkpoint
 from d5rl.training.loop import load_run, train
 from tests.training.helpers import interrupt_after_checkpoint
@@ -100,7 +101,7 @@ def _write_pickle_checkpoint(d, marker):
 def test_crafted_pickle_is_never_opened_by_train_or_eval(tmp_path):
     ds = toy_dataset(10)
     run = tmp_path / "run"
-    train("bc", "toy-reach-v0", 16, 0, 0, SMALL + ["checkpoint_interval=8"], run, dataset=ds)
+    train(resolve("bc", "toy-reach-v0", SMALL + ["checkpoint_interval=8"], offline_steps=16), run, dataset=ds)
     marker = tmp_path / "pwned"
     for name in ("checkpoint", "checkpoint.prev"):
         import shutil
@@ -108,7 +109,7 @@ def test_crafted_pickle_is_never_opened_by_train_or_eval(tmp_path):
         shutil.rmtree(run / name)
         _write_pickle_checkpoint(run / name, marker)
     with pytest.raises(CheckpointError, match="pickle"):
-        train("bc", "toy-reach-v0", 16, 0, 0, SMALL + ["checkpoint_interval=8"], run, dataset=ds)
+        train(resolve("bc", "toy-reach-v0", SMALL + ["checkpoint_interval=8"], offline_steps=16), run, dataset=ds)
     with pytest.raises(CheckpointError, match="pickle"):
         load_run(run)
     proc = subprocess.run(
@@ -126,7 +127,7 @@ def test_pickle_bytes_in_the_new_format_do_not_run(tmp_path):
     """Even with a matching manifest, agent bytes go through msgpack, which builds data, not objects."""
     ds = toy_dataset(10)
     run = tmp_path / "run"
-    train("bc", "toy-reach-v0", 8, 0, 0, SMALL + ["checkpoint_interval=8"], run, dataset=ds)
+    train(resolve("bc", "toy-reach-v0", SMALL + ["checkpoint_interval=8"], offline_steps=8), run, dataset=ds)
     marker = tmp_path / "pwned"
     ckpt = load_checkpoint(run)
     save_checkpoint(run, Checkpoint(pickle.dumps(_Payload(marker)), ckpt.state))
@@ -138,13 +139,13 @@ def test_pickle_bytes_in_the_new_format_do_not_run(tmp_path):
 def test_damaged_latest_checkpoint_resumes_from_previous_and_matches(tmp_path, capsys):
     ds = toy_dataset(20)
     kw = SMALL + ["checkpoint_interval=16"]
-    full = train("td3bc", "toy-reach-v0", 64, 0, 1, kw, tmp_path / "a", dataset=ds)
+    full = train(resolve("td3bc", "toy-reach-v0", kw, offline_steps=64, seed=1), tmp_path / "a", dataset=ds)
     with pytest.raises(KeyboardInterrupt), interrupt_after_checkpoint(48):
-        train("td3bc", "toy-reach-v0", 64, 0, 1, kw, tmp_path / "b", dataset=ds)
+        train(resolve("td3bc", "toy-reach-v0", kw, offline_steps=64, seed=1), tmp_path / "b", dataset=ds)
     assert json.loads((tmp_path / "b" / "checkpoint" / "state.json").read_text())["step"] == 48
     _flip_byte(tmp_path / "b" / "checkpoint" / "agent.msgpack")
     capsys.readouterr()
-    resumed = train("td3bc", "toy-reach-v0", 64, 0, 1, kw, tmp_path / "b", dataset=ds)
+    resumed = train(resolve("td3bc", "toy-reach-v0", kw, offline_steps=64, seed=1), tmp_path / "b", dataset=ds)
     err = capsys.readouterr().err
     assert "warning:" in err and "using the previous checkpoint" in err
     for a, b in zip(_leaves(full["agent"]), _leaves(resumed["agent"])):
@@ -156,20 +157,24 @@ def test_a_checkpoint_of_another_observation_size_is_refused_in_one_line(tmp_pat
     run = tmp_path / "run"
     # a constant lr: BC's default decay horizon follows the run's length, and a longer run is another config
     overrides = SMALL + ["checkpoint_interval=8", "actor_decay_steps=0"]
-    train("bc", "toy-reach-v0", 8, 0, 0, overrides, run, dataset=toy_dataset(10))
+    train(resolve("bc", "toy-reach-v0", overrides, offline_steps=8), run, dataset=toy_dataset(10))
     ds = toy_dataset(10)
     eps = [ds.episode(i) for i in range(ds.num_episodes)]
     for e in eps:
         e.arrays["observations"] = np.concatenate([e.arrays["observations"]] * 2, axis=1)
     with pytest.raises(CheckpointError, match=r"has shape \(4, 32\), this agent's \(8, 32\)"):
-        train("bc", "toy-reach-v0", 16, 0, 0, overrides, run, dataset=Dataset.from_episodes(eps, metadata=ds.metadata))
+        train(
+            resolve("bc", "toy-reach-v0", overrides, offline_steps=16),
+            run,
+            dataset=Dataset.from_episodes(eps, metadata=ds.metadata),
+        )
 
 
 def test_a_fresh_start_drops_the_metrics_of_a_killed_attempt_without_checkpoint(tmp_path):
     run = tmp_path / "run"
     run.mkdir()
     (run / "metrics.jsonl").write_text(json.dumps({"step": 4000, "stale/loss": 1.0}) + "\n")
-    train("bc", "toy-reach-v0", 8, 0, 0, SMALL, run, dataset=toy_dataset(10))
+    train(resolve("bc", "toy-reach-v0", SMALL, offline_steps=8), run, dataset=toy_dataset(10))
     rows = [json.loads(line) for line in (run / "metrics.jsonl").read_text().splitlines()]
     assert rows and all(r["step"] <= 8 and "stale/loss" not in r for r in rows)
 

@@ -7,6 +7,7 @@ import pytest
 
 from d5rl.agents.config import ConfigError
 from d5rl.envs.toy.data import toy_dataset
+from d5rl.settings import resolve
 from d5rl.training.loop import NonFiniteLossError, load_run, train
 from tests.training.helpers import leaves, overrides
 
@@ -14,12 +15,7 @@ from tests.training.helpers import leaves, overrides
 def test_offline_run_writes_everything(tmp_path):
     ds = toy_dataset(20)
     res = train(
-        "iql",
-        "toy-reach-v0",
-        64,
-        0,
-        0,
-        overrides(eval_interval=32, checkpoint_interval=32),
+        resolve("iql", "toy-reach-v0", overrides(eval_interval=32, checkpoint_interval=32), offline_steps=64),
         tmp_path / "run",
         dataset=ds,
     )
@@ -49,29 +45,31 @@ def test_nan_rewards_stop_the_run(tmp_path):
     ds = toy_dataset(10)
     ds.arrays["rewards"] = np.full_like(ds.arrays["rewards"], np.nan)
     with pytest.raises(NonFiniteLossError, match="critic/loss") as e:
-        train("iql", "toy-reach-v0", 32, 0, 0, overrides(), tmp_path / "n", dataset=ds)
+        train(resolve("iql", "toy-reach-v0", overrides(), offline_steps=32), tmp_path / "n", dataset=ds)
     assert e.value.hint
 
 
 def test_overrides_are_checked(tmp_path):
     with pytest.raises(ConfigError, match="unknown config key"):
-        train("bc", "toy-reach-v0", 8, 0, 0, ["no_such_key=1"], tmp_path / "o", dataset=toy_dataset(5))
+        train(resolve("bc", "toy-reach-v0", ["no_such_key=1"], offline_steps=8), tmp_path / "o", dataset=toy_dataset(5))
     with pytest.raises(ConfigError):
-        train("bc", "toy-reach-v0", 8, 0, 0, ["batch_size=big"], tmp_path / "o", dataset=toy_dataset(5))
+        train(
+            resolve("bc", "toy-reach-v0", ["batch_size=big"], offline_steps=8), tmp_path / "o", dataset=toy_dataset(5)
+        )
 
 
 def test_other_run_in_directory_is_refused(tmp_path):
     from d5rl.training.loop import RunDirError
 
     ds = toy_dataset(5)
-    train("bc", "toy-reach-v0", 8, 0, 0, overrides(), tmp_path / "r", dataset=ds)
+    train(resolve("bc", "toy-reach-v0", overrides(), offline_steps=8), tmp_path / "r", dataset=ds)
     with pytest.raises(RunDirError):
-        train("bc", "toy-reach-v0", 8, 0, 0, overrides(actor_lr=1e-3), tmp_path / "r", dataset=ds)
+        train(resolve("bc", "toy-reach-v0", overrides(actor_lr=1e-3), offline_steps=8), tmp_path / "r", dataset=ds)
 
 
 def test_td3bc_run_normalizes_states_with_the_dataset_statistics(tmp_path):
     ds = toy_dataset(20)
-    train("td3bc", "toy-reach-v0", 16, 0, 0, overrides(), tmp_path / "t", dataset=ds)
+    train(resolve("td3bc", "toy-reach-v0", overrides(), offline_steps=16), tmp_path / "t", dataset=ds)
     agent_cfg = json.loads((tmp_path / "t" / "config.json").read_text())["agent"]
     obs = np.asarray(ds.observations, np.float64)
     np.testing.assert_allclose(agent_cfg["obs_mean"], obs.mean(0), rtol=1e-6, atol=1e-9)
@@ -111,15 +109,15 @@ def test_the_run_records_the_dataset_it_trains_on(tmp_path):
     from d5rl.training.loop import RunDirError
 
     ds = d5rl.load_dataset("toy-reach-v0", episodes=6)
-    train("bc", "toy-reach-v0", 8, 0, 0, overrides(), tmp_path / "r", dataset=ds)
+    train(resolve("bc", "toy-reach-v0", overrides(), offline_steps=8), tmp_path / "r", dataset=ds)
     recorded = json.loads((tmp_path / "r" / "config.json").read_text())["dataset"]
     assert recorded == {**data_identity("toy-reach-v0"), "episodes": 6}
     # the same directory resumed on other data is another run
     ds.metadata["dataset_version"] = recorded["dataset_version"] + 1
     with pytest.raises(RunDirError, match="trained on other data"):
-        train("bc", "toy-reach-v0", 8, 0, 0, overrides(), tmp_path / "r", dataset=ds)
+        train(resolve("bc", "toy-reach-v0", overrides(), offline_steps=8), tmp_path / "r", dataset=ds)
     # in-memory data (no generated dataset behind it) records nothing
-    train("bc", "toy-reach-v0", 8, 0, 0, overrides(), tmp_path / "m", dataset=toy_dataset(5))
+    train(resolve("bc", "toy-reach-v0", overrides(), offline_steps=8), tmp_path / "m", dataset=toy_dataset(5))
     assert "dataset" not in json.loads((tmp_path / "m" / "config.json").read_text())
 
 
@@ -133,12 +131,7 @@ def test_networks_or_batches_too_big_for_memory_fail_in_one_line_before_anything
     assert available_memory() is not None
     with pytest.raises(ConfigError, match=r"need at least [\d,.]+ GiB; [\d,.]+ GiB are available") as e:
         train(
-            "td3bc",
-            "toy-reach-v0",
-            8,
-            0,
-            0,
-            overrides(**dict([setting.split("=")])),
+            resolve("td3bc", "toy-reach-v0", overrides(**dict([setting.split("=")])), offline_steps=8),
             tmp_path / "run",
             dataset=toy_dataset(4),
         )
@@ -168,7 +161,7 @@ def test_a_full_disk_under_the_run_dir_is_named_as_the_run_dirs(tmp_path, monkey
 
     monkeypatch.setattr(loop, "_write_config", full)  # the run's first write
     with pytest.raises(D5RLError, match=f"the disk holding {tmp_path / 'run'} is full") as e:
-        train("td3bc", "toy-reach-v0", 8, 0, 0, overrides(), tmp_path / "run", dataset=toy_dataset(4))
+        train(resolve("td3bc", "toy-reach-v0", overrides(), offline_steps=8), tmp_path / "run", dataset=toy_dataset(4))
     assert "--run-dir" in e.value.hint and "D5RL_HOME" not in e.value.hint
 
 

@@ -81,7 +81,7 @@ def test_stochastic_evaluation_does_not_depend_on_env_count():
 
 
 def test_cli_parsers(tmp_path, capsys):
-    from d5rl.training.cli import add_eval_parser, add_train_parser
+    from d5rl.runner.train_cli import add_eval_parser, add_train_parser
 
     parser = argparse.ArgumentParser()
     sub = parser.add_subparsers()

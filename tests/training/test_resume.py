@@ -6,17 +6,18 @@ import numpy as np
 import pytest
 
 from d5rl.envs.toy.data import toy_dataset
+from d5rl.settings import resolve
 from d5rl.training.loop import train
 from tests.training.helpers import interrupt_after_checkpoint, leaves, overrides, rows
 
 
 def assert_offline_resume_is_exact(tmp_path, algo, task, steps, kw, ds, interrupt_at):
     """A run killed after its checkpoint at ``interrupt_at`` and resumed ends where an unbroken run does."""
-    full = train(algo, task, steps, 0, 1, kw, tmp_path / "a", dataset=ds)
+    full = train(resolve(algo, task, kw, offline_steps=steps, seed=1), tmp_path / "a", dataset=ds)
     with pytest.raises(KeyboardInterrupt), interrupt_after_checkpoint(interrupt_at):
-        train(algo, task, steps, 0, 1, kw, tmp_path / "b", dataset=ds)
+        train(resolve(algo, task, kw, offline_steps=steps, seed=1), tmp_path / "b", dataset=ds)
     first_process = json.loads((tmp_path / "b" / "checkpoint" / "state.json").read_text())["elapsed_s"]
-    resumed = train(algo, task, steps, 0, 1, kw, tmp_path / "b", dataset=ds)
+    resumed = train(resolve(algo, task, kw, offline_steps=steps, seed=1), tmp_path / "b", dataset=ds)
     for a, b in zip(leaves(full["agent"]), leaves(resumed["agent"])):
         np.testing.assert_array_equal(a, b)
     assert rows(tmp_path / "a") == rows(tmp_path / "b")
@@ -40,12 +41,16 @@ def test_pixel_offline_resume_is_exact_with_batches_gathered_ahead(tmp_path):
 def test_online_resume_is_exact_for_rlpd(tmp_path):
     ds = toy_dataset(10)
     kw = overrides(utd_ratio=2, batch_size=16, start_steps=10, checkpoint_interval=20, eval_interval=1000)
-    full = train("rlpd", "toy-reach-v0", 0, 75, 2, kw, tmp_path / "a", dataset=ds)
+    full = train(
+        resolve("rlpd", "toy-reach-v0", kw, offline_steps=0, online_steps=75, seed=2), tmp_path / "a", dataset=ds
+    )
     with pytest.raises(KeyboardInterrupt), interrupt_after_checkpoint(20):
-        train("rlpd", "toy-reach-v0", 0, 75, 2, kw, tmp_path / "b", dataset=ds)
+        train(resolve("rlpd", "toy-reach-v0", kw, offline_steps=0, online_steps=75, seed=2), tmp_path / "b", dataset=ds)
     state_step = json.loads((tmp_path / "b" / "checkpoint" / "state.json").read_text())["step"]
     assert state_step == 25  # the checkpoint due at step 20 waits for the episode end
-    resumed = train("rlpd", "toy-reach-v0", 0, 75, 2, kw, tmp_path / "b", dataset=ds)
+    resumed = train(
+        resolve("rlpd", "toy-reach-v0", kw, offline_steps=0, online_steps=75, seed=2), tmp_path / "b", dataset=ds
+    )
     for a, b in zip(leaves(full["agent"]), leaves(resumed["agent"])):
         np.testing.assert_array_equal(a, b)
     assert rows(tmp_path / "a") == rows(tmp_path / "b")
@@ -56,7 +61,11 @@ def test_online_resume_is_exact_for_rlpd(tmp_path):
 def test_calql_online_finetuning_runs(tmp_path):
     ds = toy_dataset(10)
     res = train(
-        "calql", "toy-reach-v0", 16, 30, 0, overrides(cql_n_actions=2, eval_interval=1000), tmp_path / "c", dataset=ds
+        resolve(
+            "calql", "toy-reach-v0", overrides(cql_n_actions=2, eval_interval=1000), offline_steps=16, online_steps=30
+        ),
+        tmp_path / "c",
+        dataset=ds,
     )
     assert res["step"] == 46 and np.isfinite(res["return"])
 
@@ -159,7 +168,7 @@ def test_a_run_killed_in_its_final_evaluation_resumes_it(tmp_path, monkeypatch, 
 
     ds = toy_dataset(10)
     kw = overrides(checkpoint_interval=16, eval_interval=1000, eval_episodes=6, eval_envs=2)
-    full = train("bc", "toy-reach-v0", 32, 0, 1, kw, tmp_path / "a", dataset=ds)
+    full = train(resolve("bc", "toy-reach-v0", kw, offline_steps=32, seed=1), tmp_path / "a", dataset=ds)
     real_save = EvalProgress.save
 
     def save_then_die(self, *a):
@@ -168,7 +177,7 @@ def test_a_run_killed_in_its_final_evaluation_resumes_it(tmp_path, monkeypatch, 
 
     monkeypatch.setattr(EvalProgress, "save", save_then_die)
     with pytest.raises(KeyboardInterrupt):
-        train("bc", "toy-reach-v0", 32, 0, 1, kw, tmp_path / "b", dataset=ds)
+        train(resolve("bc", "toy-reach-v0", kw, offline_steps=32, seed=1), tmp_path / "b", dataset=ds)
     assert len(json.loads((tmp_path / "b" / "eval_progress.json").read_text())["episodes"]) == 2
     monkeypatch.setattr(EvalProgress, "save", real_save)
     progress = json.loads((tmp_path / "b" / "eval_progress.json").read_text())
@@ -176,7 +185,7 @@ def test_a_run_killed_in_its_final_evaluation_resumes_it(tmp_path, monkeypatch, 
     progress["wall_s"] = 5000.0  # as if they had taken 5,000 s: the resumed run must count them
     (tmp_path / "b" / "eval_progress.json").write_text(json.dumps(progress))
     capsys.readouterr()
-    resumed = train("bc", "toy-reach-v0", 32, 0, 1, kw, tmp_path / "b", dataset=ds)
+    resumed = train(resolve("bc", "toy-reach-v0", kw, offline_steps=32, seed=1), tmp_path / "b", dataset=ds)
     assert "evaluation resumes at episode 3 of 6" in capsys.readouterr().out
     assert 5000.0 < resumed["run_wall_s"] < 5000.0 + full["run_wall_s"] + 600
     drop = ("run_dir", "run_wall_s", "resumed", "agent")
@@ -188,8 +197,8 @@ def test_a_second_train_into_a_live_run_dir_fails_in_one_line_and_a_finished_run
     import subprocess
     import sys
 
-    from d5rl.training.checkpoint import RUN_LOCK
     from d5rl.training.loop import RunDirError
+    from d5rl.training.rundir import RunDir
 
     ds, kw = toy_dataset(10), overrides(checkpoint_interval=16, eval_interval=1000, updates_per_call=8)
     run_dir = tmp_path / "run"
@@ -200,7 +209,7 @@ def test_a_second_train_into_a_live_run_dir_fails_in_one_line_and_a_finished_run
             sys.executable,
             "-c",
             "import fcntl, os, sys, time\n"
-            f"fd = os.open({str(run_dir / RUN_LOCK)!r}, os.O_RDWR | os.O_CREAT)\n"
+            f"fd = os.open({str(RunDir(run_dir).train_lock)!r}, os.O_RDWR | os.O_CREAT)\n"
             "fcntl.flock(fd, fcntl.LOCK_EX); os.write(fd, f'{os.getpid()}\\n'.encode())\n"
             "print('held', flush=True); time.sleep(60)",
         ],
@@ -210,14 +219,14 @@ def test_a_second_train_into_a_live_run_dir_fails_in_one_line_and_a_finished_run
     try:
         assert holder.stdout.readline().strip() == "held"
         with pytest.raises(RunDirError, match=f"another d5rl process \\(pid {holder.pid}\\) is training into"):
-            train("td3bc", "toy-reach-v0", 32, 0, 0, kw, run_dir, dataset=ds)
+            train(resolve("td3bc", "toy-reach-v0", kw, offline_steps=32), run_dir, dataset=ds)
         assert not (run_dir / "checkpoint").exists()
     finally:
         holder.kill()
         holder.wait()
-    done = train("td3bc", "toy-reach-v0", 32, 0, 0, kw, run_dir, dataset=ds)
+    done = train(resolve("td3bc", "toy-reach-v0", kw, offline_steps=32), run_dir, dataset=ds)
     before = rows(run_dir)
-    again = train("td3bc", "toy-reach-v0", 32, 0, 0, kw, run_dir, dataset=ds)
+    again = train(resolve("td3bc", "toy-reach-v0", kw, offline_steps=32), run_dir, dataset=ds)
     assert rows(run_dir) == before  # no second final evaluation row
     assert sum(1 for r in before if any(k.startswith("eval/") for k in r)) == 1
     assert again["return"] == done["return"] and again["step"] == 32

@@ -4,6 +4,11 @@ from __future__ import annotations
 
 import argparse
 import json
+import sys
+
+from d5rl import settings
+from d5rl.settings import run_steps
+from d5rl.training.config import check_run
 
 
 def add_train_parser(subparsers) -> argparse.ArgumentParser:
@@ -45,12 +50,6 @@ def add_train_parser(subparsers) -> argparse.ArgumentParser:
 
 
 def cmd_train(args) -> int:
-    import sys
-
-    from d5rl.settings import resolve, run_steps
-    from d5rl.training.config import check_run
-    from d5rl.training.loop import train
-
     offline, online = run_steps(args.algo, args.offline_steps, args.online_steps)
     if args.offline_steps and offline != args.offline_steps:
         print(
@@ -59,11 +58,15 @@ def cmd_train(args) -> int:
             file=sys.stderr,
         )
     check_run(offline, online, args.seed)
-    run = resolve(args.algo, args.task, args.overrides, offline_steps=offline, online_steps=online)
+    spec = settings.resolve(
+        args.algo, args.task, args.overrides, offline_steps=offline, online_steps=online, seed=args.seed
+    )
     if args.show_config:
-        print(json.dumps(run.to_json(), indent=2))
+        print(json.dumps(spec.to_json(), indent=2))
         return 0
-    res = train(args.algo, args.task, offline, online, args.seed, args.overrides, args.run_dir)
+    from d5rl.training.loop import train  # JAX: --show-config and `d5rl --help` start without it
+
+    res = train(spec, args.run_dir)
     res.pop("agent", None)
     print(json.dumps(res, indent=2))
     return 0
