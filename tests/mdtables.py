@@ -25,7 +25,7 @@ def task_of(row: list[str]) -> str | None:
 
 def entries(header, rows) -> dict[tuple[str, str], str]:
     """(task, method label) -> the table's entry, for the columns named after a method."""
-    from d5rl.runner.report import METHODS
+    from d5rl.runner.results import METHODS
 
     labels = set(METHODS.values())
     out = {}

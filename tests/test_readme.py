@@ -83,7 +83,7 @@ def test_result_tables_match_their_reports():
     (the last ``docs/results/<grid>/`` linked above it), number for number: a hand-copied table cannot drift
     from ``d5rl report``'s output.  An entry may add a remark after the number (``(n=1)``).  Every published
     grid has a table checked this way, and the front page carries the headline one."""
-    from d5rl.runner.report import METHODS
+    from d5rl.runner.results import METHODS
 
     checked: dict[str, int] = {}
     for page in PAGES:

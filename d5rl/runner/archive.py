@@ -16,6 +16,8 @@ import argparse
 import sys
 from pathlib import Path
 
+from d5rl.runner.results import collect
+from d5rl.runner.videos import ranked_cells
 from d5rl.training.rundir import CHECKPOINT, CHECKPOINT_TMP_PREFIX, NOT_ARCHIVED, RunDir
 
 
@@ -29,9 +31,6 @@ def _files(d: Path) -> list[Path]:
 
 def archive_files(run_dir: Path | str, budget_bytes: int) -> tuple[list[Path], list[Path]]:
     """``(files, cells whose checkpoint is included)``; files are relative to ``run_dir``."""
-    from d5rl.runner.report import collect
-    from d5rl.runner.videos import ranked_cells
-
     root = Path(run_dir)
     files = [p for p in _files(root) if not _skipped(p.relative_to(root))]
     size = sum(p.stat().st_size for p in files)

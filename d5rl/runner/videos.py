@@ -13,22 +13,23 @@ checkpoint is here (or when no cell of its task has one).  Needs the
 
 from __future__ import annotations
 
+import json
 from pathlib import Path
 
 import numpy as np
 
 from d5rl.rollout import Step, rollout
+from d5rl.runner.results import METHODS, method_name
 from d5rl.training.rundir import RunDir
 from d5rl.video import write_gif
 
+GIFS = "videos"  # the report's folder of rollout GIFs and their captions.json
 GIF_SIZE = (120, 160)  # (height, width) of the frames
 EVERY = 2  # keep every 2nd step: ~10 frames per second of simulated time at 20 Hz control
 
 
 def ranked_cells(results, task: str) -> list:
     """The finished, current cells of ``task`` with a final score, best first (the GIF's choice)."""
-    from d5rl.runner.report import METHODS
-
     order = list(METHODS)
     cells = [r for r in results if r.task == task and r.counts and r.final]
     score = lambda r: r.final.get("online", r.final.get("offline", -np.inf))  # noqa: E731
@@ -96,7 +97,7 @@ def typical_rollout(cell_dir: Path, task: str, *, episodes: int = 5, size=GIF_SI
 def write_rollout_gifs(results, out_dir: Path, log=print) -> dict[str, str]:
     """``{task: caption}`` for every GIF under ``out_dir/videos`` after writing the ones it can (see the
     module docstring).  A caption names the cell and the episode's score."""
-    videos = Path(out_dir) / "videos"
+    videos = Path(out_dir) / GIFS
     captions = read_captions(videos)
     for task in sorted({r.task for r in results}):
         shown = captions.get(task) if (videos / f"{task}.gif").exists() else None
@@ -119,15 +120,11 @@ def write_rollout_gifs(results, out_dir: Path, log=print) -> dict[str, str]:
 
 def _cell_label(cell) -> str:
     """How a caption names its cell: method, seed and final score (a cell trained again scores anew)."""
-    from d5rl.runner.report import method_name
-
     final = cell.final.get("online", cell.final.get("offline"))
     return f"{method_name(cell.algo)} seed {cell.seed} (final score {final:.3f})"
 
 
 def read_captions(videos: Path) -> dict[str, str]:
-    import json
-
     path = videos / "captions.json"
     try:
         return dict(json.loads(path.read_text()))
@@ -136,8 +133,6 @@ def read_captions(videos: Path) -> dict[str, str]:
 
 
 def _write_captions(videos: Path, captions: dict[str, str]) -> None:
-    import json
-
     if captions:
         videos.mkdir(parents=True, exist_ok=True)
         (videos / "captions.json").write_text(json.dumps(captions, indent=2, sort_keys=True) + "\n")

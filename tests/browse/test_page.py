@@ -178,7 +178,8 @@ def test_runs_view_compares_agents_with_the_paper_as_the_reports_do(tmp_path):
     """Two grids whose folders are both ``cells``: one table per task with every agent of both, named apart,
     each entry as the grid's report.md writes it next to the paper's, sortable, the best mean highlighted;
     learning curves for the agent evaluated twice, final scores per seed for the others."""
-    from d5rl.runner.report import seed_interval, write_report
+    from d5rl.runner.report import write_report
+    from d5rl.runner.results import seed_interval
     from tests.mdtables import report_entries
 
     grids = {

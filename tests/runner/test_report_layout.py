@@ -117,7 +117,8 @@ def test_a_state_twin_is_compared_with_its_camera_task():
 def test_wall_time_counts_every_process(tmp_path):
     """A cell's wall time is its run's summed over the processes that ran it; for older runs that only know the
     last process's, the protocol table says it is a lower bound."""
-    from d5rl.runner.report import collect, protocol_markdown
+    from d5rl.runner.results import collect
+    from d5rl.runner.tables import protocol_markdown
 
     for seed, (summary, processes) in enumerate([({"run_wall_s": 600.0, "episodes": 5}, 2), ({"episodes": 5}, 1)]):
         cell = Cell("a1-walk-v0", "bc", seed, 100, 0)
