@@ -1,7 +1,14 @@
-"""Run independent jobs in parallel: in this process, a local process pool, or a Ray cluster.
+"""The executor: every parallel job of d5rl runs here, in this process, in local processes, or on a Ray cluster.
 
-Dataset generation and the render cache both cut their work into shards and run one
-job per shard through :func:`run_jobs`; the backend is chosen by ``workers``:
+Two forms share the backends, the worker set-up (:func:`configure_worker`, :func:`die_with_parent`) and the Ray
+connection (:func:`connect_ray`):
+
+- :func:`run_jobs`: many short jobs on a pool of long-lived workers, results in order, progress messages
+  streamed back (dataset generation and the render cache, one job per shard);
+- :class:`Tasks`: long tasks, each in a fresh worker process, submitted and collected one by one so the caller
+  can retry them (the cells of a ``d5rl bench`` grid).
+
+For :func:`run_jobs` the backend is chosen by ``workers``:
 
 - ``1``: in this process (no pickling; easiest to debug);
 - ``N > 1`` or ``None`` (all cores): a ``spawn`` process pool on this machine;
@@ -34,12 +41,16 @@ from __future__ import annotations
 
 import contextlib
 import hashlib
+import importlib
+import json
 import multiprocessing as mp
 import os
 import pickle
 import queue as queue_mod
 import signal
+import subprocess
 import sys
+import tempfile
 import threading
 import time
 import traceback
@@ -348,7 +359,7 @@ def _run_pool(fn, jobs, n, initializer, initargs, on_message, settle, worker_env
 
 def import_ray():
     try:
-        import ray
+        import ray  # optional (pip install ray): only --ray runs need it
     except ImportError as e:
         raise MissingDependencyError(
             "the Ray backend needs the `ray` package",
@@ -419,3 +430,163 @@ def _run_ray(fn, jobs, address, initializer, initargs, on_message, settle, share
         q.shutdown()
         if check_file is not None:
             Path(check_file).unlink(missing_ok=True)
+
+
+# --- one task per fresh process: bench cells --------------------------------------------------------------
+@dataclass
+class Finished:
+    """How one task of :class:`Tasks` ended: what it returned, or why it did not (``error``, a line, and
+    ``traceback``, the details: the task's traceback or the backend's error)."""
+
+    key: Any
+    value: Any = None
+    error: str | None = None
+    traceback: str = ""
+
+
+class Tasks:
+    """Tasks ``fn(*args)`` (``fn`` named ``"module:function"``), each in a fresh worker process, on one backend:
+
+    - ``workers=0``: in this process, one after another (for debugging);
+    - ``workers=N``: at most N local processes at once, each a fresh interpreter (``python -m d5rl.parallel``:
+      no inherited JAX or GL state, no re-run of the caller's ``__main__``) that dies with this process;
+    - :class:`Ray` ``(address)``: Ray tasks reserving ``cpus`` and ``gpus`` each, one worker process per task.
+
+    Workers start with :func:`configure_worker` (``single_thread``, ``nice``) before anything else is imported.
+    The caller submits tasks while :attr:`free`, and :meth:`wait` returns those that finished; a task that
+    failed can be submitted again.  Leaving the ``with`` block stops the tasks still running.
+    """
+
+    def __init__(self, workers: int | Ray, *, single_thread: bool = True, nice: int = 0, cpus=1.0, gpus=0.0):
+        self.workers, self.single_thread, self.nice = workers, bool(single_thread), int(nice)
+        self._done: list[Finished] = []
+        self._running: dict = {}  # local: Popen -> (key, result pipe); Ray: ref -> key
+        if isinstance(workers, Ray):
+            self._ray = connect_ray(workers.address)
+            # max_calls=1: a fresh worker process per task (clean JAX state, freed memory), as locally;
+            # retries are the caller's, so Ray's are off
+            self._remote = self._ray.remote(num_cpus=cpus, num_gpus=gpus, max_calls=1, max_retries=0)(_call)
+
+    @property
+    def free(self) -> bool:
+        """Whether a task submitted now starts at once (Ray queues every task: always)."""
+        if isinstance(self.workers, Ray):
+            return True
+        return not self._done if self.workers == 0 else len(self._running) < int(self.workers)
+
+    @property
+    def running(self) -> int:
+        return len(self._running) + len(self._done)
+
+    def submit(self, key, fn: str, *args) -> None:
+        if isinstance(self.workers, Ray):
+            ref = self._remote.remote(fn, args, self.single_thread, self.nice)
+            self._running[ref] = key
+        elif self.workers == 0:
+            self._done.append(_finished(key, lambda: resolve_name(fn)(*args)))
+        else:
+            self._running[self._start(key, fn, args)] = key
+
+    def _start(self, key, fn: str, args: tuple):
+        spec = {"fn": fn, "args": args, "single_thread": self.single_thread, "nice": self.nice}
+        spec["sys_path"] = [p for p in sys.path if p]  # the caller's import path (its jobs, test modules)
+        env = dict(os.environ)
+        pkg_root = str(Path(__file__).resolve().parents[1])  # so the worker imports this d5rl
+        env["PYTHONPATH"] = os.pathsep.join([pkg_root] + [p for p in env.get("PYTHONPATH", "").split(os.pathsep) if p])
+        fd, result = tempfile.mkstemp(prefix="d5rl-task-", suffix=".json")
+        os.close(fd)
+        argv = [sys.executable, "-c", _WORKER, result, str(key)]  # the key: which task it is, in `ps`
+        proc = subprocess.Popen(argv, env=env, stdin=subprocess.PIPE)
+        proc.stdin.write(json.dumps(spec).encode())
+        proc.stdin.close()
+        proc.result_path = Path(result)
+        return proc
+
+    def wait(self) -> list[Finished]:
+        """The tasks that finished since the last call (blocks until at least one has, while any runs)."""
+        while not self._done and self._running:
+            if isinstance(self.workers, Ray):
+                ready, _ = self._ray.wait(list(self._running), num_returns=1)
+                for ref in ready:
+                    key = self._running.pop(ref)
+                    self._done.append(_finished(key, lambda ref=ref: self._ray.get(ref), remote=True))
+                continue
+            ended = [p for p in self._running if p.poll() is not None]
+            if not ended:
+                time.sleep(0.05)
+            for proc in ended:
+                self._done.append(_read_result(self._running.pop(proc), proc))
+        done, self._done = self._done, []
+        return done
+
+    def close(self) -> None:
+        if isinstance(self.workers, Ray):
+            for ref in self._running:
+                with contextlib.suppress(Exception):
+                    self._ray.cancel(ref, force=True)
+        else:
+            for proc in self._running:
+                proc.terminate()
+            for proc in self._running:
+                with contextlib.suppress(subprocess.TimeoutExpired):
+                    proc.wait(5)
+                proc.result_path.unlink(missing_ok=True)
+        self._running.clear()
+
+    def __enter__(self) -> Tasks:
+        return self
+
+    def __exit__(self, *exc) -> None:
+        self.close()
+
+
+def resolve_name(name: str) -> Callable:
+    """The function ``"package.module:function"`` names."""
+    module, _, attr = name.partition(":")
+    return getattr(importlib.import_module(module), attr)
+
+
+def _finished(key, call: Callable[[], Any], remote: bool = False) -> Finished:
+    try:
+        return Finished(key, call())
+    except Exception as e:  # noqa: BLE001 - the task's failure, reported to the caller
+        if remote:  # a worker crash, a lost node, an unpicklable result
+            line = str(e).splitlines()[0] if str(e) else ""
+            return Finished(key, error=f"Ray task failed: {type(e).__name__}: {line}", traceback=str(e))
+        return Finished(key, error=f"{type(e).__name__}: {e}", traceback=traceback.format_exc())
+
+
+def _read_result(key, proc) -> Finished:
+    data = ""
+    with contextlib.suppress(OSError):
+        data = proc.result_path.read_text()
+    proc.result_path.unlink(missing_ok=True)
+    if proc.returncode == 0 and data:
+        return Finished(key, **json.loads(data))
+    code = proc.returncode
+    how = f"killed by signal {-code}" if code < 0 else f"exit code {code}"
+    return Finished(key, error=f"worker process died ({how})")
+
+
+def _call(fn: str, args: tuple, single_thread: bool, nice: int):
+    """A task in a Ray worker process."""
+    configure_worker(single_thread, nice)
+    return resolve_name(fn)(*args)
+
+
+_WORKER = "import sys; from d5rl.parallel import _task_main; sys.exit(_task_main(sys.argv[1:]))"
+
+
+def _task_main(argv: list[str]) -> int:
+    """One task of :class:`Tasks` in this fresh process (``argv``: the result file, the task's key): its spec
+    read from stdin, its result written as JSON (``{"value": ...}`` or ``{"error": ..., "traceback": ...}``)."""
+    die_with_parent()  # no orphan races the caller's next attempt
+    spec = json.loads(sys.stdin.buffer.read())
+    configure_worker(spec["single_thread"], spec["nice"])  # before JAX is imported
+    for p in reversed(spec["sys_path"]):
+        if p not in sys.path:
+            sys.path.insert(0, p)
+    done = _finished(None, lambda: resolve_name(spec["fn"])(*spec["args"]))
+    out = {"value": done.value} if done.error is None else {"error": done.error, "traceback": done.traceback}
+    Path(argv[0]).write_text(json.dumps(out, default=str))
+    return 0

@@ -17,7 +17,6 @@ import dataclasses
 import json
 import os
 import socket
-import subprocess
 import sys
 import time
 from collections.abc import Iterable
@@ -25,10 +24,12 @@ from pathlib import Path
 
 from d5rl.errors import D5RLError
 from d5rl.files import write_atomic
-from d5rl.parallel import configure_worker, connect_ray
-from d5rl.runner.execute import EXIT_CODES, clear_job_outputs, execute_cell, record_failure, reset_cell
+from d5rl.parallel import Ray, Tasks
+from d5rl.runner.execute import clear_job_outputs, record_failure, reset_cell
 from d5rl.runner.grid import DEFAULT_JOB, Cell, GridError, read_cell, same_run, stale_reason
 from d5rl.training.rundir import BENCH_LOG, RunDir
+
+EXECUTE = "d5rl.runner.execute:execute_cell"  # what every cell runs, in a worker process of its own
 
 
 @dataclasses.dataclass
@@ -176,24 +177,13 @@ def run_bench(
     if prepare_data and pending:
         prepare_datasets(pending, workers=workers or None, progress=progress)
     bar = _progress(len(cells), len(result.skipped), progress)
+    if use_ray or ray_address:
+        backend = Ray(ray_address)
+    else:
+        backend = 0 if workers == 0 else workers or default_workers()
     try:
-        if use_ray or ray_address:
-            _run_ray(
-                pending,
-                run_dir,
-                result,
-                bar,
-                ray_address,
-                max_attempts,
-                single_thread,
-                nice,
-                cpus_per_cell,
-                gpus_per_cell,
-            )
-        elif workers == 0:
-            _run_inline(pending, run_dir, result, bar, max_attempts)
-        else:
-            _run_local(pending, run_dir, result, bar, workers or default_workers(), max_attempts, single_thread, nice)
+        with Tasks(backend, single_thread=single_thread, nice=nice, cpus=cpus_per_cell, gpus=gpus_per_cell) as tasks:
+            _run(pending, run_dir, result, bar, tasks, max_attempts, capture_output=backend != 0)
     finally:
         bar.close()
     result.wall_s = time.time() - t0
@@ -226,15 +216,33 @@ def _settle(
     bar.set_postfix(ok=len(result.ok), failed=len(result.failed), refresh=False)
 
 
-def _run_inline(pending: list[Cell], run_dir: Path, result: BenchResult, bar, max_attempts: int) -> None:
+def _run(pending: list[Cell], run_dir: Path, result: BenchResult, bar, tasks: Tasks, max_attempts: int, capture_output):
+    """Run the cells through ``tasks`` (one :func:`~d5rl.runner.execute.execute_cell` each), retrying a failed
+    cell while it has attempts left; a worker that died before recording anything is recorded here."""
     queue = collections.deque(pending)
     tries: dict[str, int] = collections.Counter()
-    while queue:
-        cell = queue.popleft()
-        tries[cell.key] += 1
-        cdir = cell.directory(run_dir)
-        out = execute_cell(cell.to_json(), str(cdir), _prior_attempts(cdir) + 1, capture_output=False)
-        _settle(cell, out["status"], out.get("error"), result, bar, queue, tries, max_attempts)
+    cells: dict[str, tuple[Cell, int]] = {}
+    while queue or tasks.running:
+        while queue and tasks.free:
+            cell = queue.popleft()
+            tries[cell.key] += 1
+            cdir = cell.directory(run_dir)
+            attempt = _prior_attempts(cdir) + 1
+            cells[str(cdir)] = (cell, attempt)
+            cdir.mkdir(parents=True, exist_ok=True)
+            tasks.submit(str(cdir), EXECUTE, cell.to_json(), str(cdir.resolve()), attempt, capture_output)
+        for done in tasks.wait():
+            cell, attempt = cells.pop(done.key)
+            cdir = Path(done.key)
+            if done.error is not None:  # died before it could record anything (segfault, OOM kill, lost node)
+                tail = f"last lines of {RunDir(cdir).log.name}:\n{_log_tail(cdir)}"
+                record_failure(cdir, attempt, done.error, f"{done.traceback}\n\n{tail}".lstrip())
+                status, error = "failed", done.error
+            else:
+                status, error = done.value["status"], done.value.get("error")
+            if status == "ok" and not RunDir(cdir).is_done():  # the cell dir is not shared with this machine
+                status, error = "failed", f"no done marker in {cdir}: is the run directory on a shared filesystem?"
+            _settle(cell, status, error, result, bar, queue, tries, max_attempts)
 
 
 def _log_tail(cdir: Path, n: int = 40) -> str:
@@ -244,132 +252,3 @@ def _log_tail(cdir: Path, n: int = 40) -> str:
     with contextlib.suppress(OSError):
         return "\n".join(path.read_text(errors="replace").splitlines()[-n:])
     return ""
-
-
-def _start_worker(cell: Cell, cdir: Path, attempt: int, single_thread: bool, nice: int) -> subprocess.Popen:
-    """A fresh interpreter per cell (``python -m d5rl.runner.worker``): no inherited JAX/GL state, and no
-    re-import of the caller's ``__main__`` (unlike multiprocessing's spawn)."""
-    payload = {
-        "cell": cell.to_json(),
-        "cell_dir": str(cdir),
-        "attempt": attempt,
-        "single_thread": single_thread,
-        "nice": nice,
-        "sys_path": [p for p in sys.path if p],
-    }
-    cdir.mkdir(parents=True, exist_ok=True)
-    spec = RunDir(cdir).worker
-    write_atomic(spec, json.dumps(payload))
-    env = dict(os.environ)
-    pkg_root = str(Path(__file__).resolve().parents[2])  # so `-m d5rl.runner.worker` finds this d5rl
-    env["PYTHONPATH"] = os.pathsep.join([pkg_root] + [p for p in env.get("PYTHONPATH", "").split(os.pathsep) if p])
-    return subprocess.Popen([sys.executable, "-m", "d5rl.runner.worker", str(spec)], env=env, stdin=subprocess.DEVNULL)
-
-
-def _run_local(
-    pending: list[Cell],
-    run_dir: Path,
-    result: BenchResult,
-    bar,
-    workers: int,
-    max_attempts: int,
-    single_thread: bool,
-    nice: int,
-) -> None:
-    queue = collections.deque(pending)
-    tries: dict[str, int] = collections.Counter()
-    running: list[tuple] = []
-    try:
-        while queue or running:
-            while queue and len(running) < workers:
-                cell = queue.popleft()
-                tries[cell.key] += 1
-                cdir = cell.directory(run_dir)
-                attempt = _prior_attempts(cdir) + 1
-                running.append((_start_worker(cell, cdir, attempt, single_thread, nice), cell, attempt))
-            finished = [r for r in running if r[0].poll() is not None]
-            if not finished:
-                time.sleep(0.05)
-                continue
-            for item in finished:
-                running.remove(item)
-                proc, cell, attempt = item
-                cdir = cell.directory(run_dir)
-                code = proc.returncode
-                if code == EXIT_CODES["ok"] and RunDir(cdir).is_done():
-                    status, error = "ok", None
-                elif code == EXIT_CODES["busy"]:
-                    status, error = "busy", None
-                elif code == EXIT_CODES["failed"]:
-                    fails = RunDir(cdir).read_failures()
-                    status, error = "failed", (fails[-1]["error"] if fails else f"exit code {code}")
-                else:  # died before it could record anything (segfault, OOM kill, import error)
-                    how = f"killed by signal {-code}" if code < 0 else f"exit code {code}"
-                    error = f"worker process died ({how})"
-                    record_failure(cdir, attempt, error, f"last lines of {RunDir(cdir).log.name}:\n" + _log_tail(cdir))
-                    status = "failed"
-                _settle(cell, status, error, result, bar, queue, tries, max_attempts)
-    finally:
-        for proc, _, _ in running:
-            proc.terminate()
-        for proc, _, _ in running:
-            with contextlib.suppress(subprocess.TimeoutExpired):
-                proc.wait(5)
-
-
-# --------------------------------------------------------------------------- Ray
-
-
-def _ray_task(cell_json: dict, cell_dir: str, attempt: int, single_thread: bool, nice: int) -> dict:
-    configure_worker(single_thread, nice)
-    return execute_cell(cell_json, cell_dir, attempt)
-
-
-def _run_ray(
-    pending: list[Cell],
-    run_dir: Path,
-    result: BenchResult,
-    bar,
-    address: str | None,
-    max_attempts: int,
-    single_thread: bool,
-    nice: int,
-    cpus: float,
-    gpus: float,
-) -> None:
-    ray = connect_ray(address)
-    # max_calls=1: a fresh worker process per cell (clean JAX state, freed memory), like the local pool;
-    # retries are ours (recorded in the cell directory), so Ray's are off.
-    remote = ray.remote(num_cpus=cpus, num_gpus=gpus, max_calls=1, max_retries=0)(_ray_task)
-    queue = collections.deque(pending)
-    tries: dict[str, int] = collections.Counter()
-    running: dict = {}
-    try:
-        while queue or running:
-            while queue:
-                cell = queue.popleft()
-                tries[cell.key] += 1
-                cdir = cell.directory(run_dir)
-                attempt = _prior_attempts(cdir) + 1
-                ref = remote.remote(cell.to_json(), str(cdir.resolve()), attempt, single_thread, nice)
-                running[ref] = (cell, attempt)
-            done, _ = ray.wait(list(running), num_returns=1)
-            for ref in done:
-                cell, attempt = running.pop(ref)
-                cdir = cell.directory(run_dir)
-                try:
-                    out = ray.get(ref)
-                    status, error = out["status"], out.get("error")
-                except Exception as e:  # noqa: BLE001 - worker crash, node loss, unpicklable result
-                    error = f"Ray task failed: {type(e).__name__}: {str(e).splitlines()[0] if str(e) else ''}"
-                    record_failure(
-                        cdir, attempt, error, f"{e}\n\nlast lines of {RunDir(cdir).log.name}:\n{_log_tail(cdir)}"
-                    )
-                    status = "failed"
-                if status == "ok" and not RunDir(cdir).is_done():  # the cell dir is not shared with this machine
-                    status, error = "failed", f"no done marker in {cdir}: is the run directory on a shared filesystem?"
-                _settle(cell, status, error, result, bar, queue, tries, max_attempts)
-    finally:
-        for ref in running:
-            with contextlib.suppress(Exception):
-                ray.cancel(ref, force=True)

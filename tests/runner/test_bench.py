@@ -223,7 +223,7 @@ def test_killed_sweep_resumes_without_redoing_finished_cells(tmp_path):
                 cmdline = (proc_dir / "cmdline").read_bytes().decode(errors="replace")
             except OSError:
                 continue
-            if "d5rl.runner.worker" in cmdline and str(run_dir) in cmdline:
+            if "d5rl.parallel" in cmdline and str(run_dir) in cmdline:
                 orphans.append(cmdline)
         if not orphans or time.time() > deadline:
             break
