@@ -126,7 +126,7 @@ def test_the_run_records_the_dataset_it_trains_on(tmp_path):
 )
 def test_networks_or_batches_too_big_for_memory_fail_in_one_line_before_anything_is_written(tmp_path, setting):
     from d5rl.agents.config import ConfigError
-    from d5rl.training.loop import available_memory
+    from d5rl.training.memory import available_memory
 
     assert available_memory() is not None
     with pytest.raises(ConfigError, match=r"need at least [\d,.]+ GiB; [\d,.]+ GiB are available") as e:
@@ -141,7 +141,7 @@ def test_networks_or_batches_too_big_for_memory_fail_in_one_line_before_anything
 
 def test_the_memory_floor_counts_each_network_once_as_float32_with_adam():
     from d5rl.agents.config import Config
-    from d5rl.training.loop import memory_floor
+    from d5rl.training.memory import memory_floor
 
     example = {"observations": np.zeros((1, 3), np.float32), "actions": np.zeros((1, 2), np.float32)}
     cfg = Config({"batch_size": 10, "hidden_dims": (4, 5)})
