@@ -174,7 +174,7 @@ def test_eval_episodes(capsys, tmp_path):
 
 
 def test_eval_on_a_task_with_other_spaces(capsys, tmp_path):
-    from d5rl.envs.toy.data import toy_dataset
+    from d5rl.production.toy.data import toy_dataset
     from d5rl.settings import resolve
     from d5rl.training.loop import train
 

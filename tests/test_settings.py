@@ -192,7 +192,7 @@ def test_rlpd_takes_no_offline_steps_before_fine_tuning(capsys):
 
 
 def test_a_run_records_the_resolved_config_that_eval_reads(tmp_path):
-    from d5rl.envs.toy.data import toy_dataset
+    from d5rl.production.toy.data import toy_dataset
     from d5rl.training.loop import load_run, train
 
     over = ["hidden_dims=16,16", "eval_episodes=1", "eval_envs=1", "progress=false", "tensorboard=false"]

@@ -19,7 +19,7 @@ def column_labels(spec, key: str, ncols: int) -> list[str] | None:
 def value_labels(spec, key: str) -> list[str] | None:
     """Names of the integer values of a 1-D ``infos/<key>`` (WidowX: the scripted policy's stages)."""
     if spec.family == "wx" and key == "infos/stage":
-        from d5rl.envs.widowx.scripted import STAGES
+        from d5rl.production.widowx.scripted import STAGES
 
         return list(STAGES)
     return None
@@ -41,7 +41,7 @@ def overview_extras(spec, ds) -> list[dict]:
     """Family plots for the dataset overview (bar charts: ``{title, x, y, xlabel, ylabel}``)."""
     if spec.family != "wx" or not ds.episode_meta or "placed_as_intended" not in ds.episode_meta[0]:
         return []
-    from d5rl.envs.widowx.datacard_stats import stats
+    from d5rl.production.widowx.datacard_stats import stats
 
     s = stats(list(ds.episode_meta))
     stages = [k for k in s if k.startswith("stage")]

@@ -65,7 +65,9 @@ class EpisodeGenerator(Protocol):
     The class is constructed once per worker process with ``DatasetSpec.generator_kwargs``
     (and ``task_id=``), then asked for episodes by global index.  ``episode`` must be a
     pure function of ``(index, rng)``: the same inputs give the same bytes, whatever
-    process or order it runs in.  ``version`` names the generator's code revision.
+    process or order it runs in.  ``version`` names the generator's code revision; an optional
+    ``name`` is what manifests call it (default: its "module:Class"), see
+    :func:`d5rl.datasets.generation.producer_name`.
     """
 
     version: str

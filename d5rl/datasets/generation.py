@@ -106,7 +106,7 @@ def _identity(dspec: DatasetSpec, seed: int, generator_version: str) -> dict:
     ident = {
         "dataset": dspec.name,
         "dataset_version": dspec.version,
-        "generator": dspec.producer,  # the importer, for an imported dataset
+        "generator": producer_name(dspec),
         "generator_version": generator_version,
         "generator_kwargs": dspec.generator_kwargs,
         "seed": seed,
@@ -117,6 +117,13 @@ def _identity(dspec: DatasetSpec, seed: int, generator_version: str) -> dict:
         if digests:  # absent rather than empty, so data without such inputs keep their identity
             ident["generator_inputs"] = digests
     return _json_normal(ident)
+
+
+def producer_name(dspec: DatasetSpec) -> str:
+    """The name a dataset's manifest and shards give the code that writes it (its generator, or its importer):
+    the producer's ``name`` where it sets one, the "module:Class" it was first published under, kept when the
+    code moves so that data already made stay current; else ``DatasetSpec.generator`` / ``importer``."""
+    return getattr(resolve(dspec.producer), "name", dspec.producer)
 
 
 def identity(dspec: DatasetSpec, seed: int | None = None) -> dict:

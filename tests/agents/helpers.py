@@ -5,7 +5,7 @@ from __future__ import annotations
 import numpy as np
 
 from d5rl.agents import get_agent
-from d5rl.envs.toy.data import toy_dataset
+from d5rl.production.toy.data import toy_dataset
 
 KEYS = ("observations", "actions", "rewards", "masks", "next_observations", "mc_returns", "next_actions")
 

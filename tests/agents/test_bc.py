@@ -1,6 +1,6 @@
 import numpy as np
 
-from d5rl.envs.toy.data import toy_dataset
+from d5rl.production.toy.data import toy_dataset
 from tests.agents.helpers import make_agent, train
 
 

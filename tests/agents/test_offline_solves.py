@@ -8,7 +8,7 @@ policy from the same data in 1,500 updates.
 import numpy as np
 import pytest
 
-from d5rl.envs.toy.data import toy_dataset
+from d5rl.production.toy.data import toy_dataset
 from d5rl.training.evaluation import evaluate
 from tests.agents.helpers import make_agent, train
 

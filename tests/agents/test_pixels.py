@@ -6,7 +6,7 @@ import numpy as np
 import pytest
 
 from d5rl.agents import AGENTS
-from d5rl.envs.toy.data import toy_dataset
+from d5rl.production.toy.data import toy_dataset
 from tests.agents.helpers import make_agent
 
 _DS = {}

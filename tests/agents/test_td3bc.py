@@ -1,7 +1,7 @@
 import numpy as np
 
 from d5rl.agents.common import observation_stats
-from d5rl.envs.toy.data import toy_dataset
+from d5rl.production.toy.data import toy_dataset
 from tests.agents.helpers import dataset, make_agent, train
 
 

@@ -120,7 +120,7 @@ def test_obs_keys_selects_parts():
 
 
 def test_next_actions_stay_within_the_episode():
-    from d5rl.envs.toy.data import toy_dataset
+    from d5rl.production.toy.data import toy_dataset
 
     ds = toy_dataset(3)
     last = ds.episode_starts + ds.episode_lengths - 1

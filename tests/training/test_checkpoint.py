@@ -11,7 +11,7 @@ import numpy as np
 import pytest
 
 from d5rl.datasets.dataset import Dataset
-from d5rl.envs.toy.data import toy_dataset
+from d5rl.production.toy.data import toy_dataset
 from d5rl.settings import resolve
 from d5rl.training.checkpoint import Checkpoint, CheckpointError, load_checkpoint, read_checkpoint, save_checkpoint
 from d5rl.training.loop import load_run, train

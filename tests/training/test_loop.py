@@ -6,7 +6,7 @@ import numpy as np
 import pytest
 
 from d5rl.agents.config import ConfigError
-from d5rl.envs.toy.data import toy_dataset
+from d5rl.production.toy.data import toy_dataset
 from d5rl.settings import resolve
 from d5rl.training.loop import NonFiniteLossError, load_run, train
 from tests.training.helpers import leaves, overrides

@@ -170,7 +170,7 @@ def test_replay_buffer_next_actions_stay_within_episodes():
 def test_prefetched_batches_are_the_sequential_ones():
     """Gathering ahead in threads changes nothing a run sees: the same batches in the same order, and the
     run's generator after each batch in the state a plain ``sample`` leaves it (what checkpoints save)."""
-    from d5rl.envs.toy.data import toy_dataset
+    from d5rl.production.toy.data import toy_dataset
     from d5rl.training.parts import Prefetcher, Sampler
 
     sampler = Sampler(toy_dataset(6, pixels=True), 3, ("mc_returns",), 0.9)
@@ -190,7 +190,7 @@ def test_prefetched_batches_are_the_sequential_ones():
 def test_a_failed_prefetch_raises_in_the_training_thread():
     import pytest
 
-    from d5rl.envs.toy.data import toy_dataset
+    from d5rl.production.toy.data import toy_dataset
     from d5rl.training.parts import Prefetcher, Sampler
 
     class Broken(Sampler):

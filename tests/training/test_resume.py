@@ -5,7 +5,7 @@ import json
 import numpy as np
 import pytest
 
-from d5rl.envs.toy.data import toy_dataset
+from d5rl.production.toy.data import toy_dataset
 from d5rl.settings import resolve
 from d5rl.training.loop import train
 from tests.training.helpers import interrupt_after_checkpoint, leaves, overrides, rows

@@ -5,11 +5,11 @@ from __future__ import annotations
 from d5rl.registry import DatasetSpec, ScoreRef, TaskSpec, register
 
 HORIZON = 25  # d5rl.envs.toy.task.HORIZON (not imported: registration stays light)
-# reference_returns() in d5rl/envs/toy/data.py; tests/envs/toy checks these against it
+# reference_returns() in d5rl/production/toy/data.py; tests/production/toy checks these against it
 SCORE = ScoreRef(
     random=6.585704803466797,
     expert=20.73187255859375,
-    source="d5rl.envs.toy.data.reference_returns(): 20 seeded episodes of each policy",
+    source="d5rl.production.toy.data.reference_returns(): 20 seeded episodes of each policy",
 )
 
 for suffix, pixels in (("", False), ("-pixels", True)):
@@ -23,7 +23,7 @@ for suffix, pixels in (("", False), ("-pixels", True)):
             dataset=DatasetSpec(
                 name=f"toy-reach{suffix}",
                 version=1,
-                generator="d5rl.envs.toy.data:ToyGenerator",
+                generator="d5rl.production.toy.data:ToyGenerator",
                 num_episodes=200,
                 episodes_per_shard=50,
                 generator_kwargs={"pixels": pixels},

@@ -7,8 +7,8 @@ from d5rl.registry import DatasetSpec, TaskSpec, register
 MAX_EPISODE_STEPS = 120  # control steps of 0.1 s
 
 _ENTRY = "d5rl.envs.widowx.task:WidowXSortingEnv"
-_GENERATOR = "d5rl.envs.widowx.data:WidowXScriptedGenerator"
-_RENDERS = "d5rl.envs.widowx.data:renders"  # side-camera frames, rendered from stored states on load
+_GENERATOR = "d5rl.production.widowx.data:WidowXScriptedGenerator"
+_RENDERS = "d5rl.production.widowx.data:renders"  # side-camera frames, rendered from stored states on load
 # The normalized score is not a function of the return (the reward counts sorted objects at
 # every step): score_from="info" makes evaluators read info["score"] at the episode's end.
 _SCORE_DEFINITION = (

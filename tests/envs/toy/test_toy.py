@@ -5,12 +5,6 @@ import numpy as np
 from gymnasium.utils.env_checker import check_env
 
 import d5rl
-from d5rl.envs.toy.data import reference_returns
-
-
-def test_score_references_are_what_the_policies_score():
-    spec = d5rl.get_spec("toy-reach-v0")
-    assert (spec.score.random, spec.score.expert) == reference_returns()
 
 
 def test_registered_env_dataset_and_score():

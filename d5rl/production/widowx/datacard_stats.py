@@ -1,7 +1,7 @@
 """Success statistics by stage of the WidowX scripted datasets (for docs/datacards/widowx.md).
 
-    python -m d5rl.envs.widowx.datacard_stats --episodes 200 [--task wx-sorting-v0]
-    python -m d5rl.envs.widowx.datacard_stats --frames docs/img/widowx-first-frames.png
+    python -m d5rl.production.widowx.datacard_stats --episodes 200 [--task wx-sorting-v0]
+    python -m d5rl.production.widowx.datacard_stats --frames docs/img/widowx-first-frames.png
 
 Computes the statistics from the first N episodes of each dataset exactly as
 ``d5rl generate`` makes them (same generator, same per-episode seeds), without

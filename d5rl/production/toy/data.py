@@ -56,6 +56,7 @@ class ToyGenerator:
     """Episode ``i``: :func:`toy_episode` with the dataset's expert probability and noise."""
 
     version = "1"
+    name = "d5rl.envs.toy.data:ToyGenerator"  # in the manifests (the code's first home)
 
     def __init__(self, task_id: str, pixels: bool = False, expert_prob: float = 0.3, noise: float = 0.3):
         self.pixels, self.expert_prob, self.noise = pixels, expert_prob, noise
