@@ -317,7 +317,7 @@ _PLUGINS = [
     ("d5rl.runner.cli", "add_bench_parser"),
     ("d5rl.runner.cli", "add_report_parser"),
     ("d5rl.browse.server", "add_browse_parser"),
-    ("d5rl.envs.kitchen.human", "add_import_kitchen_human_parser"),
+    ("d5rl.production.kitchen.human", "add_import_kitchen_human_parser"),
     ("d5rl.envs.a1.calibrate", "add_calibrate_parser"),
 ]
 

@@ -8,22 +8,22 @@ MAX_EPISODE_STEPS = 280  # control steps of 0.08 s (the D5RL release's standard 
 STANDARD_DATASET = DatasetSpec(
     name="kitchen-standard",
     version=1,  # 1: demonstrator without detours or pauses (generator kitchen-standard-demos-6)
-    generator="d5rl.envs.kitchen.data:KitchenStandardGenerator",
+    generator="d5rl.production.kitchen.data:KitchenStandardGenerator",
     num_episodes=563,
     episodes_per_shard=16,
     description="scripted demonstrations of 22 four-subtask combinations in a fixed order (paper: 563 episodes)",
-    derived="d5rl.envs.kitchen.data:renders",
+    derived="d5rl.production.kitchen.data:renders",
 )
 HUMAN_DATASET = DatasetSpec(
     name="kitchen-standard-human",
     version=1,
     generator=None,
-    importer="d5rl.envs.kitchen.human:KitchenHumanImport",
+    importer="d5rl.production.kitchen.human:KitchenHumanImport",
     num_episodes=0,  # as many as the imported file holds
     episodes_per_shard=16,
     description="the relay-policy-learning human demonstrations the paper used, imported with "
     "`d5rl import-kitchen-human` (Minari D4RL/kitchen/*-v2 or a D4RL kitchen file)",
-    derived="d5rl.envs.kitchen.data:renders",
+    derived="d5rl.production.kitchen.data:renders",
 )
 SCORE = (
     "fraction of the 4 target subtasks whose object reached its goal configuration during the episode "
@@ -45,7 +45,7 @@ for name, tasks, desc in (
                 description=f"Franka Kitchen, {what}: {desc}",
                 env_kwargs={"tasks": tasks, **({"obs_mode": "state"} if obs == "state" else {})},
                 dataset=STANDARD_DATASET,
-                relabel="d5rl.envs.kitchen.data:relabel",
+                relabel="d5rl.production.kitchen.data:relabel",
                 score=None,
                 score_from="info",
                 score_definition=SCORE,

@@ -5,6 +5,7 @@ from __future__ import annotations
 
 import numpy as np
 
+from d5rl.datasets.dataset import Dataset
 from d5rl.datasets.episode import Episode
 from d5rl.envs.toy.task import GOAL, HORIZON, ToyReachEnv
 
@@ -45,8 +46,6 @@ def toy_dataset(
     num_episodes: int = 200, seed: int = 0, expert_prob: float = 0.3, noise: float = 0.3, pixels: bool = False
 ):
     """A :class:`~d5rl.datasets.dataset.Dataset` of ``num_episodes`` suboptimal episodes."""
-    from d5rl.datasets.dataset import Dataset
-
     rng = np.random.default_rng(seed)
     eps = [toy_episode(rng, expert_prob, noise, pixels) for _ in range(num_episodes)]
     return Dataset.from_episodes(eps, metadata={"task_id": "toy-reach-pixels-v0" if pixels else "toy-reach-v0"})

@@ -18,6 +18,9 @@ from collections import Counter
 import numpy as np
 
 from d5rl.datasets.generation import episode_rng, make_generator
+from d5rl.datasets.loading import load_dataset
+from d5rl.envs.widowx.data import render_states
+from d5rl.envs.widowx.model import CATEGORY
 from d5rl.registry import get_spec
 
 TASKS = ("wx-sorting-v0", "wx-sorting-pickplacedata-v0")
@@ -26,8 +29,6 @@ TASKS = ("wx-sorting-v0", "wx-sorting-pickplacedata-v0")
 def episode_metas(task_id: str, episodes: int, from_disk: bool) -> list[dict]:
     spec = get_spec(task_id)
     if from_disk:
-        from d5rl.datasets.loading import load_dataset
-
         return list(load_dataset(task_id, episodes=episodes, generate=False, render=False).episode_meta)
     gen = make_generator(spec)
     seed = spec.dataset.default_seed
@@ -88,8 +89,6 @@ def _mean(xs) -> float:
 
 
 def _category(name: str) -> str:
-    from d5rl.envs.widowx.model import CATEGORY
-
     return CATEGORY[name]
 
 
@@ -140,8 +139,6 @@ def to_markdown(task_id: str, s: dict) -> str:
 
 def first_frames(n: int = 8, size: int = 128) -> np.ndarray:
     """uint8 (2 * size, n / 2 * size, 3): the first side-camera frame of episodes 0..n-1 of wx-sorting."""
-    from d5rl.envs.widowx.data import render_states
-
     spec = get_spec(TASKS[0])
     gen = make_generator(spec)
     frames = []

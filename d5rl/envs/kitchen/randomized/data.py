@@ -1,140 +1,17 @@
-"""Randomized-kitchen datasets: emulated human teleoperation by operators with skill parameters.
-
-Each episode draws a domain (the env's reset), an operator and a subtask list, then runs the
-standard kitchen's scripted :class:`~d5rl.envs.kitchen.demonstrator.Demonstrator` with the
-operator's habits for 500 steps (after the last subtask the operator holds still, with noise).
-
-- ``demos``: one skilled operator, the ``mixed`` task's four subtasks in a random order.
-- ``play``: operators of several skill levels, 2-6 random subtasks in random order; no episode
-  contains all four ``partial`` subtasks.
-- ``suboptimal``: unskilled operators on the ``mixed`` subtasks in random order.
-
-Operators (:class:`Operator`): ``speed`` (phase speed), ``noise`` (smoothed action noise std),
-``hesitation`` (chance of a short pause before each phase), ``detour`` (chance of a detour via a
-random point), ``give_up`` (chance of abandoning a subtask attempt -- emulating a failed grasp
-that is not retried) and ``retries`` (how often a subtask the script did not finish is tried again).  Stored per episode (meta): ``domain`` (re-render exactly with
-:func:`render_episode`), ``operator``, ``subtasks``, ``solved``.
+"""A randomized-kitchen dataset episode seen through the simulator: camera frames of its stored states in
+its stored domain.  The randomized kitchen datasets' derived caches
+(:func:`d5rl.production.kitchen.randomized.data.renders`) are made of this function, whose "module:function"
+name is in every cache's records.
 """
 
 from __future__ import annotations
 
-import dataclasses
 from collections.abc import Sequence
 
 import numpy as np
 
-from d5rl.datasets.episode import Episode
-from d5rl.envs.kitchen.data import record_episode
-from d5rl.envs.kitchen.randomized.task import CAMERAS
-from d5rl.envs.kitchen.subtasks import MIXED, PARTIAL, SUBTASK_NAMES
-
-MAX_STEPS = 500
-
-
-@dataclasses.dataclass(frozen=True)
-class Operator:
-    name: str
-    speed: tuple[float, float]
-    noise: tuple[float, float]
-    hesitation: tuple[float, float]
-    detour: tuple[float, float]
-    give_up: float
-    retries: int = 0  # tries again at a subtask the script did not finish (at most this many times)
-
-    def style(self, rng: np.random.Generator):
-        from d5rl.envs.kitchen.demonstrator import Style
-
-        return Style(
-            speed=float(rng.uniform(*self.speed)),
-            noise=float(rng.uniform(*self.noise)),
-            pause_prob=float(rng.uniform(*self.hesitation)),
-            via_prob=float(rng.uniform(*self.detour)),
-        )
-
-
-SKILLED = Operator(
-    "skilled", speed=(1.0, 1.2), noise=(0.01, 0.03), hesitation=(0.0, 0.05), detour=(0.0, 0.1), give_up=0.0, retries=3
-)
-AVERAGE = Operator(
-    "average", speed=(0.8, 1.1), noise=(0.03, 0.08), hesitation=(0.05, 0.2), detour=(0.1, 0.3), give_up=0.04, retries=1
-)
-NOVICE = Operator(
-    "novice", speed=(0.6, 0.9), noise=(0.08, 0.15), hesitation=(0.15, 0.35), detour=(0.3, 0.6), give_up=0.06
-)
-OPERATORS = {o.name: o for o in (SKILLED, AVERAGE, NOVICE)}
-MIXED_ORDER = tuple(MIXED)
-MODES = {"demos": (SKILLED,), "play": (SKILLED, AVERAGE, NOVICE), "suboptimal": (AVERAGE, NOVICE)}
-
-
-def play_subtasks(rng: np.random.Generator) -> list[str]:
-    """2-6 subtasks, as many equally often (4 on average), never the partial task's four together."""
-    n = int(rng.integers(2, 7))
-    while True:  # redraw the set, not its size: rejecting sizes would favour small sets (3.7 on average)
-        chosen = [SUBTASK_NAMES[i] for i in rng.permutation(len(SUBTASK_NAMES))[:n]]
-        if not set(PARTIAL) <= set(chosen):
-            return chosen
-
-
-class RandomizedKitchenGenerator:
-    """Episode generator; ``mode`` is ``demos``, ``play`` or ``suboptimal``."""
-
-    # 2: microwave pose noise; 3: integral action, wrist homing; 4: unwind; 5: straight reaches;
-    # 6: joint-space transits, surface textures, microwave handles per model, wider microwave and kettle
-    #    poses, kettle yaw (the domain draws more numbers, so every episode changes)
-    # 7: kettle and microwave models with their own collision geometry, mass and handle (grasp plan per
-    #    model), two kettle sites, wider microwave and kettle ranges, photographic textures, cabinet handles
-    # 8: average and novice operators abandon a subtask half as often (0.04 / 0.06): sub-optimal data
-    #    3.33 -> 3.52 objects per episode on its first 160 episodes (paper 3.55); play episodes ask for
-    #    2-6 subtasks equally often (4 on average, was 3.7); demos unchanged
-    # 9: a joint-space transit whose inverse kinematics from the rest posture misses by > 5 cm is solved
-    #    again from fixed offset seeds (tall kettles on the top-right burner were left out of reach)
-    version = "kitchen-randomized-9"
-
-    def __init__(self, task_id: str | None = None, mode: str = "demos", max_steps: int = MAX_STEPS):
-        from d5rl.envs.kitchen.randomized.task import RandomizedKitchenEnv
-        from d5rl.errors import D5RLError
-
-        if mode not in MODES:
-            raise D5RLError(f"unknown randomized-kitchen dataset mode {mode!r}", f"use one of {list(MODES)}")
-        self.mode = mode
-        self.env = RandomizedKitchenEnv(obs_mode="state")
-        self.max_steps = int(max_steps)
-
-    def episode(self, index: int, rng: np.random.Generator) -> Episode:
-        ops = MODES[self.mode]
-        op = ops[int(rng.integers(len(ops)))]
-        subtasks = play_subtasks(rng) if self.mode == "play" else [MIXED[i] for i in rng.permutation(len(MIXED))]
-        return self.demonstrate(subtasks, op, rng)
-
-    def demonstrate(self, subtasks: Sequence[str], op: Operator, rng: np.random.Generator) -> Episode:
-        from d5rl.envs.kitchen.demonstrator import Demonstrator
-
-        env = self.env
-        _, info0 = env.reset(seed=int(rng.integers(2**31)))
-        attempted = [s for s in subtasks if rng.random() >= op.give_up]
-        # an abandoned subtask is still approached for a while (a failed attempt), then dropped
-        policy = Demonstrator(env, attempted, rng, style=op.style(rng), transit_first=True, retries=op.retries)
-        cols = np.array([SUBTASK_NAMES.index(s) for s in subtasks])
-        hold_noise = np.zeros(9)
-
-        def hold(action):  # after the script: hold still with the operator's slowly varying noise
-            nonlocal hold_noise
-            hold_noise = 0.8 * hold_noise + 0.2 * rng.normal(0.0, policy.style.noise, 9)
-            return np.clip(action + hold_noise, -1, 1).astype(np.float32)
-
-        arrays = record_episode(env, policy, self.max_steps, cols, when_finished=hold)
-        solved_any = arrays["infos/completed"].any(axis=0)
-        meta = {
-            "domain": info0["domain"],
-            "operator": op.name,
-            "style": dataclasses.asdict(policy.style),
-            "subtasks": list(subtasks),
-            "attempted": attempted,
-            "solved": [s for s in SUBTASK_NAMES if solved_any[SUBTASK_NAMES.index(s)]],
-            "num_solved": int(solved_any.sum()),
-        }
-        return Episode(arrays, meta)
-
+from d5rl.envs.kitchen.randomized.domain import Domain
+from d5rl.envs.kitchen.randomized.task import CAMERAS, RandomizedKitchenEnv
 
 # --- rendering stored states with their domains -------------------------------------------------
 _RENDER_ENV = {}
@@ -142,9 +19,6 @@ _RENDER_ENV = {}
 
 def render_episode(arrays: dict, meta: dict, cameras: Sequence[str] = CAMERAS, size: int = 128) -> dict:
     """``observations/pixels/<camera>`` of a stored episode, in its stored domain."""
-    from d5rl.envs.kitchen.randomized.domain import Domain
-    from d5rl.envs.kitchen.randomized.task import RandomizedKitchenEnv
-
     size = int(size)
     if size not in _RENDER_ENV:
         _RENDER_ENV[size] = RandomizedKitchenEnv(image_size=size)
@@ -157,52 +31,3 @@ def render_episode(arrays: dict, meta: dict, cameras: Sequence[str] = CAMERAS, s
         for c in cameras:
             out[c][i] = env.render_camera_image(c, size, size)
     return {f"observations/pixels/{c}": v for c, v in out.items()}
-
-
-def renders(
-    spec,
-    root,
-    manifest,
-    *,
-    episodes: int,
-    workers: int | None = None,
-    progress: bool = True,
-    cameras: Sequence[str] = CAMERAS,
-    size: int = 128,
-    render: bool = True,
-    check: bool = False,
-) -> list:
-    """``DatasetSpec.derived``: camera frames of the stored states in their domains (cached); for a
-    ``-state`` task, its state observations instead.  ``check=True`` only checks the arguments."""
-    from d5rl.datasets.render_cache import check_render_args, ensure_render_cache
-
-    cameras, size = check_render_args(cameras, size, CAMERAS)
-    if check or not render:
-        return []
-
-    if spec is not None and spec.observation == "state":
-        return [
-            ensure_render_cache(
-                root,
-                manifest,
-                "d5rl.envs.kitchen.data:state_episode",
-                {},
-                name="state",
-                episodes=episodes,
-                workers=workers,
-                progress=progress,
-            )
-        ]
-
-    return [
-        ensure_render_cache(
-            root,
-            manifest,
-            "d5rl.envs.kitchen.randomized.data:render_episode",
-            {"cameras": tuple(cameras), "size": int(size)},
-            name=f"{'+'.join(cameras)}-{int(size)}x{int(size)}",
-            episodes=episodes,
-            workers=workers,
-            progress=progress,
-        )
-    ]

@@ -12,12 +12,12 @@ def _dataset(mode: str, n: int, desc: str) -> DatasetSpec:
         version=3,  # 1: object models with their own physics, two kettle sites, wider ranges, photo textures
         # 2: generator 8 (unskilled operators give up half as often; demos bytes unchanged)
         # 3: generator 9 (transits re-solve a missed inverse kinematics: far kettles reached)
-        generator="d5rl.envs.kitchen.randomized.data:RandomizedKitchenGenerator",
+        generator="d5rl.production.kitchen.randomized.data:RandomizedKitchenGenerator",
         num_episodes=n,
         episodes_per_shard=16,
         generator_kwargs={"mode": mode},
         description=desc,
-        derived="d5rl.envs.kitchen.randomized.data:renders",
+        derived="d5rl.production.kitchen.randomized.data:renders",
     )
 
 
@@ -40,7 +40,7 @@ for task_name, dataset_mode, tasks, n, desc in (
                 description=f"Randomized Franka Kitchen (new domain every reset), {what}: {desc}",
                 env_kwargs={"tasks": tasks, **({"obs_mode": "state"} if obs == "state" else {})},
                 dataset=_dataset(dataset_mode, n, desc),
-                relabel="d5rl.envs.kitchen.data:relabel",
+                relabel="d5rl.production.kitchen.data:relabel",
                 score=None,
                 score_from="info",
                 score_definition=SCORE,

@@ -37,7 +37,7 @@ TASK = "kitchen-standard-mixed-state-human-v0"
 def scripted():
     """Two scripted episodes: (qpos (T+1, 30), qvel (T+1, 29), actions (T, 9), completed (T, 7))."""
     from d5rl.envs.kitchen import model as km
-    from d5rl.envs.kitchen.data import KitchenStandardGenerator
+    from d5rl.production.kitchen.data import KitchenStandardGenerator
 
     gen = KitchenStandardGenerator(max_steps=120)
     out = []
@@ -303,7 +303,7 @@ def test_action_check_measures_whether_the_actions_move_our_robot(tmp_path, scri
 
 
 def test_a_minari_id_is_found_under_home_without_minari_datasets_path(tmp_path, monkeypatch, scripted):
-    from d5rl.envs.kitchen.human import locate
+    from d5rl.production.kitchen.human import locate
 
     monkeypatch.delenv("MINARI_DATASETS_PATH", raising=False)
     monkeypatch.setenv("HOME", str(tmp_path))
@@ -368,7 +368,7 @@ def test_human_tasks_are_variants_of_the_standard_tasks():
 
 def test_comparison_statistics_of_the_imported_data(tmp_path, monkeypatch, scripted, capsys):
     from d5rl.browse.catalog import task_summary
-    from d5rl.envs.kitchen.datacard import comparison_stats, print_comparison
+    from d5rl.production.kitchen.datacard import comparison_stats, print_comparison
 
     root = write_minari(tmp_path / "minari", scripted)
     assert main(["import-kitchen-human", str(root), "--no-render", "--no-progress"]) == 0

@@ -2,8 +2,10 @@ import numpy as np
 import pytest
 
 from d5rl.datasets.dataset import Dataset
-from d5rl.envs.kitchen.randomized import data as rd
+from d5rl.envs.kitchen.randomized.data import render_episode
+from d5rl.envs.kitchen.randomized.task import CAMERAS
 from d5rl.envs.kitchen.subtasks import PARTIAL
+from d5rl.production.kitchen.randomized import data as rd
 
 
 @pytest.fixture(scope="module")
@@ -22,11 +24,11 @@ def test_episode_deterministic_and_rerender_matches_env(gen):
     from d5rl.envs.kitchen.randomized.domain import Domain
     from d5rl.envs.kitchen.randomized.task import RandomizedKitchenEnv
 
-    frames = rd.render_episode({"states": a.arrays["states"][[0, 250]]}, a.meta, size=64)
+    frames = render_episode({"states": a.arrays["states"][[0, 250]]}, a.meta, size=64)
     env = RandomizedKitchenEnv(image_size=64, domain=Domain.from_json(a.meta["domain"]))
     env.reset(seed=0)
     env.set_state(a.arrays["states"][250])
-    for c in rd.CAMERAS:
+    for c in CAMERAS:
         assert np.array_equal(frames[f"observations/pixels/{c}"][1], env.render_camera_image(c, 64, 64))
     ds = Dataset.from_episodes([a])
     assert ds.num_transitions == 500 and ds.episode_meta[0]["domain"] == a.meta["domain"]
@@ -64,8 +66,8 @@ def test_skilled_solves_more_than_novice(gen):
 
 def _skilled_operator_solves(env, subtask: str, rng: np.random.Generator, steps: int = 250) -> bool:
     """Whether the skilled operator gets ``subtask``'s object to its goal within ``steps`` (env reset)."""
-    from d5rl.envs.kitchen.demonstrator import Demonstrator
     from d5rl.envs.kitchen.subtasks import SUBTASK_NAMES
+    from d5rl.production.kitchen.demonstrator import Demonstrator
 
     policy = Demonstrator(env, [subtask], rng, style=rd.SKILLED.style(rng), transit_first=True)
     column = SUBTASK_NAMES.index(subtask)
@@ -150,7 +152,7 @@ def test_each_microwave_model_has_its_own_handle_and_opens(model):
 @pytest.mark.slow
 @pytest.mark.parametrize("kettle", range(8))
 def test_skilled_operator_moves_every_kettle_model_from_both_sites(kettle):
-    from d5rl.envs.kitchen.randomized.datacard import operator_solves
+    from d5rl.production.kitchen.randomized.datacard import operator_solves
 
     for site in (0, 1):
         assert sum(operator_solves("kettle", {"kettle": kettle, "kettle_site": site}, s) for s in range(3)) >= 2
@@ -165,9 +167,9 @@ def test_transit_to_the_far_kettle_is_resolved_when_the_rest_posture_solve_misse
 
     import mujoco
 
-    from d5rl.envs.kitchen import demonstrator as dem
     from d5rl.envs.kitchen.randomized import domain as dm
     from d5rl.envs.kitchen.randomized.task import RandomizedKitchenEnv
+    from d5rl.production.kitchen import demonstrator as dem
 
     if not reseed:
         monkeypatch.setattr(dem, "IK_SEEDS", np.zeros((0, 7)))

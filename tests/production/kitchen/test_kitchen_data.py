@@ -12,18 +12,18 @@ import d5rl
 from d5rl.cli import main
 from d5rl.datasets.loading import load_dataset
 from d5rl.envs.base import qpos_of_states
-from d5rl.envs.kitchen import data as kdata
-from d5rl.envs.kitchen.data import (
+from d5rl.envs.kitchen.data import state_episode
+from d5rl.envs.kitchen.subtasks import MIXED, PARTIAL, SUBTASK_NAMES, CompletionChecker
+from d5rl.envs.kitchen.task import KitchenEnv
+from d5rl.production.kitchen import data as kdata
+from d5rl.production.kitchen.data import (
     COMBINATIONS,
     KitchenStandardGenerator,
     combination_schedule,
     habit_schedule,
     order_probabilities,
     relabel,
-    state_episode,
 )
-from d5rl.envs.kitchen.subtasks import MIXED, PARTIAL, SUBTASK_NAMES, CompletionChecker
-from d5rl.envs.kitchen.task import KitchenEnv
 
 
 def test_combinations_never_contain_the_partial_task():
@@ -125,7 +125,7 @@ def test_dataset_round_trip_relabel_and_renders(monkeypatch, tmp_path):
     assert not np.array_equal(partial.rewards, ds.rewards)
     assert partial.rewards.max() <= 3  # never all four partial subtasks in one episode
     # camera frames come from the stored states; re-rendering never runs the demonstrator
-    import d5rl.envs.kitchen.demonstrator as dm
+    import d5rl.production.kitchen.demonstrator as dm
 
     monkeypatch.setattr(kdata.KitchenStandardGenerator, "episode", lambda *a: (_ for _ in ()).throw(AssertionError))
 

@@ -1,10 +1,10 @@
 """Statistics of the randomized-kitchen datasets and of the skilled operator, for the data card.
 
-    nice -n 5 python -m d5rl.envs.kitchen.randomized.datacard sample --episodes 160 [--modes play]  # first N
-    nice -n 5 python -m d5rl.envs.kitchen.randomized.datacard grasps --seeds 12    # per object model
-    nice -n 5 python -m d5rl.envs.kitchen.randomized.datacard corners --seeds 8    # pose-range corners
-    nice -n 5 python -m d5rl.envs.kitchen.randomized.datacard full                 # generated datasets
-    python -m d5rl.envs.kitchen.randomized.datacard frames --out docs/img/kitchen-randomized-domains.png
+    nice -n 5 python -m d5rl.production.kitchen.randomized.datacard sample --episodes 160 [--modes play]  # first N
+    nice -n 5 python -m d5rl.production.kitchen.randomized.datacard grasps --seeds 12    # per object model
+    nice -n 5 python -m d5rl.production.kitchen.randomized.datacard corners --seeds 8    # pose-range corners
+    nice -n 5 python -m d5rl.production.kitchen.randomized.datacard full                 # generated datasets
+    python -m d5rl.production.kitchen.randomized.datacard frames --out docs/img/kitchen-randomized-domains.png
 
 Grasp and corner success: the skilled operator does one subtask alone in a random domain with the
 model / pose fixed, and succeeds if the subtask's object reaches its goal within 250 steps.
@@ -18,9 +18,18 @@ import itertools
 
 import numpy as np
 
+from d5rl.datasets import format as fmt
+from d5rl.datasets import generation
+from d5rl.datasets.generation import episode_rng
+from d5rl.datasets.loading import load_dataset
 from d5rl.envs.kitchen.randomized import domain as dm
 from d5rl.envs.kitchen.randomized import objects
-from d5rl.envs.kitchen.randomized.data import MODES, SKILLED, RandomizedKitchenGenerator
+from d5rl.envs.kitchen.randomized.task import RandomizedKitchenEnv
+from d5rl.envs.kitchen.subtasks import SUBTASK_NAMES
+from d5rl.errors import DatasetNotFoundError
+from d5rl.production.kitchen.demonstrator import Demonstrator
+from d5rl.production.kitchen.randomized.data import MODES, SKILLED, RandomizedKitchenGenerator
+from d5rl.registry import get_spec
 
 PAPER = {"demos": 4.0, "play": 3.62, "suboptimal": 3.55}
 DATASETS = {
@@ -33,9 +42,6 @@ DATASETS = {
 def operator_solves(subtask: str, replace: dict, seed: int, steps: int = 250, before: tuple = ()) -> bool:
     """Whether the skilled operator gets ``subtask``'s object to its goal within ``steps`` (after doing
     the ``before`` subtasks), in a random domain with the fields ``replace`` set."""
-    from d5rl.envs.kitchen.demonstrator import Demonstrator
-    from d5rl.envs.kitchen.subtasks import SUBTASK_NAMES
-
     rng = np.random.default_rng([7, seed])
     domain = dataclasses.replace(dm.Domain.sample(rng), **replace)
     env = _env()
@@ -53,8 +59,6 @@ _ENV = []
 
 
 def _env():
-    from d5rl.envs.kitchen.randomized.task import RandomizedKitchenEnv
-
     if not _ENV:
         _ENV.append(RandomizedKitchenEnv(obs_mode="state"))
     return _ENV[0]
@@ -106,8 +110,6 @@ def corner_table(seeds: int) -> list[str]:
 def sample_stats(mode: str, episodes: int, seed: int = 0) -> dict:
     """Statistics of the dataset's first ``episodes`` episodes, generated without frames (the same
     episodes, byte for byte, as ``d5rl generate``'s: one generator per episode index and seed)."""
-    from d5rl.datasets.generation import episode_rng
-
     g = RandomizedKitchenGenerator(mode=mode)
     return _stats([g.episode(i, episode_rng(seed, i)).meta for i in range(episodes)])
 
@@ -144,12 +146,6 @@ def stats_table(stats: dict[str, dict]) -> list[str]:
 def full_stats() -> dict[str, dict]:
     """Statistics of the generated datasets; of a dataset still being generated, of its finished
     shards (a prefix of its episodes; each shard checked against its checksums)."""
-    from d5rl.datasets import format as fmt
-    from d5rl.datasets import generation
-    from d5rl.datasets.loading import load_dataset
-    from d5rl.errors import DatasetNotFoundError
-    from d5rl.registry import get_spec
-
     out = {}
     for mode, task in DATASETS.items():
         try:
@@ -171,8 +167,6 @@ def full_stats() -> dict[str, dict]:
 def domain_grid(path: str, n: int = 8, seed: int = 0, size: int = 128) -> None:
     """A PNG grid: ``n`` random domains (rows) seen by the left, right and wrist cameras at reset."""
     import imageio.v3 as iio
-
-    from d5rl.envs.kitchen.randomized.task import RandomizedKitchenEnv
 
     env = RandomizedKitchenEnv(image_size=size)
     rows = []

@@ -6,10 +6,10 @@ from __future__ import annotations
 import numpy as np
 import pytest
 
-from d5rl.envs.kitchen.data import COMBINATIONS
-from d5rl.envs.kitchen.demonstrator import Demonstrator
 from d5rl.envs.kitchen.subtasks import SUBTASK_NAMES
 from d5rl.envs.kitchen.task import KitchenEnv
+from d5rl.production.kitchen.data import COMBINATIONS
+from d5rl.production.kitchen.demonstrator import Demonstrator
 
 
 def _success(subtasks, seeds) -> np.ndarray:
@@ -120,7 +120,7 @@ def test_standard_demonstrator_never_detours_or_pauses():
     # kitchen-standard generator 6: detours via random points and pauses made the data a mixture that
     # a unimodal BC averaged (BC from state 0.01 -> 0.13 without them); the randomized kitchen's operators
     # keep both through their own styles
-    from d5rl.envs.kitchen.data import KitchenStandardGenerator
+    from d5rl.production.kitchen.data import KitchenStandardGenerator
 
     gen = KitchenStandardGenerator()
     for index in range(3):

@@ -42,7 +42,17 @@ from pathlib import Path
 
 import numpy as np
 
+from d5rl.datasets import format as fmt
+from d5rl.datasets import generation, lock
+from d5rl.datasets.loading import load_dataset
+from d5rl.envs.base import STATE_SPEC
+from d5rl.envs.kitchen import model as km
+from d5rl.envs.kitchen.registration import HUMAN_DATASET
+from d5rl.envs.kitchen.subtasks import MIXED, SUBTASK_NAMES, SUBTASKS, THRESHOLD, CompletionChecker
+from d5rl.envs.kitchen.task import KitchenEnv
 from d5rl.errors import D5RLError, MissingDependencyError
+from d5rl.production.kitchen.data import renders
+from d5rl.progress import progress_bar
 
 DEFAULT_SOURCE = "D4RL/kitchen/mixed-v2"
 # gymnasium-robotics' 59-D observation: robot qpos, robot qvel, object qpos, object qvel
@@ -54,6 +64,7 @@ class KitchenHumanImport:
     """``DatasetSpec.importer`` of the human data: what identifies the conversion, and how to get it."""
 
     version = "kitchen-human-import-1"
+    name = "d5rl.envs.kitchen.human:KitchenHumanImport"  # in the manifests (the code's first home)
     command = f"d5rl import-kitchen-human {DEFAULT_SOURCE}"
     how = (
         f"download the human demonstrations with `minari download {DEFAULT_SOURCE}` (pip install minari), "
@@ -172,8 +183,6 @@ def _finite(path: Path, name: str, arr: np.ndarray, hint: str, offset: int = 0) 
 def read_d4rl(path: Path, subtask_idx: dict[str, np.ndarray]) -> list[SourceEpisode]:
     """Episodes of a D4RL kitchen file; the file's claim is D4RL's own test (joint positions within 0.3 of
     the goal stored in the observation) for the subtasks its goal names."""
-    from d5rl.envs.kitchen.subtasks import THRESHOLD
-
     hint = "this does not look like an intact D4RL kitchen file"
     with _h5py().File(path, "r") as f:
         for key in ("observations", "actions"):
@@ -215,8 +224,6 @@ def read_d4rl(path: Path, subtask_idx: dict[str, np.ndarray]) -> list[SourceEpis
 def read_minari(path: Path, subtask_idx: dict[str, np.ndarray]) -> list[SourceEpisode]:
     """Episodes of a Minari kitchen dataset (``main_data.hdf5``); the file's claim is gymnasium-robotics'
     test (``achieved_goal`` within 0.3 of ``desired_goal``) for its target subtasks."""
-    from d5rl.envs.kitchen.subtasks import THRESHOLD
-
     hint = "this does not look like an intact Minari kitchen dataset (D4RL/kitchen/*-v2)"
     episodes = []
     with _h5py().File(path, "r") as f:
@@ -279,8 +286,6 @@ def restore_states(model, qpos: np.ndarray, qvel: np.ndarray | None) -> np.ndarr
     """Full integration states (rows of ``STATE_SPEC``) with the given joint positions and velocities."""
     import mujoco
 
-    from d5rl.envs.base import STATE_SPEC
-
     data = mujoco.MjData(model)
     out = np.empty((len(qpos), mujoco.mj_stateSize(model, STATE_SPEC)))
     for i, q in enumerate(qpos):
@@ -294,8 +299,6 @@ def restore_states(model, qpos: np.ndarray, qvel: np.ndarray | None) -> np.ndarr
 
 def replay_check(index: int, claimed: dict[str, np.ndarray], ours: np.ndarray) -> dict | None:
     """Where the file's per-step subtask claims and our scene's ``infos/completed`` disagree (None: nowhere)."""
-    from d5rl.envs.kitchen.subtasks import SUBTASK_NAMES
-
     steps = {t: int((c != ours[:, SUBTASK_NAMES.index(t)]).sum()) for t, c in claimed.items()}
     steps = {t: n for t, n in steps.items() if n}
     if not steps:
@@ -324,8 +327,6 @@ def action_errors(
 
 def completion_order(completed: np.ndarray) -> list[str]:
     """Subtasks in the order they first reach their goal in an episode (``infos/completed`` rows)."""
-    from d5rl.envs.kitchen.subtasks import SUBTASK_NAMES
-
     first = {
         SUBTASK_NAMES[j]: int(np.argmax(completed[:, j])) for j in range(completed.shape[1]) if completed[:, j].any()
     }
@@ -344,16 +345,6 @@ def import_human(
     out=print,
 ) -> Path:
     """Convert ``source`` into the ``kitchen-standard-human`` dataset; returns its directory."""
-    from d5rl.datasets import format as fmt
-    from d5rl.datasets import generation, lock
-    from d5rl.datasets.loading import load_dataset
-    from d5rl.envs.kitchen import model as km
-    from d5rl.envs.kitchen.data import renders
-    from d5rl.envs.kitchen.registration import HUMAN_DATASET
-    from d5rl.envs.kitchen.subtasks import MIXED, SUBTASK_NAMES, SUBTASKS, CompletionChecker
-    from d5rl.envs.kitchen.task import KitchenEnv
-    from d5rl.progress import progress_bar
-
     renders(None, None, None, episodes=0, cameras=cameras, size=size, check=True)  # before reading the file
     kind, path = locate(source)
     model = km.build_model()

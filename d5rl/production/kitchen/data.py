@@ -1,0 +1,232 @@
+"""The standard kitchen dataset: scripted demonstrations of 22 four-subtask combinations.
+
+Like the relay-policy-learning data that D4RL and D5RL used, every episode performs four
+subtasks in a fixed order; the 22 combinations below never contain the ``partial``
+task's full set (microwave, kettle, bottom burner, light switch), so that task needs
+combinatorial generalization.  Episodes end when the demonstrator finishes its fourth
+subtask (or after 280 steps); 563 episodes are spread over the combinations round-robin
+(or, with ``habit``, as an operator with a habit would perform them: :func:`order_probabilities`).
+
+Stored per step: simulator ``states`` (to re-render any camera at any resolution),
+``observations/proprio`` (9 joint positions) and ``infos/completed`` (per transition,
+which of the seven subtasks are in their goal configuration after it).  Camera frames are
+a derived cache (:func:`renders`, of :mod:`d5rl.envs.kitchen.data`'s renderers), built from the states on
+first load.  ``rewards`` count
+the episode's own four subtasks; each task relabels them with :func:`relabel`.
+"""
+
+from __future__ import annotations
+
+import functools
+from collections.abc import Sequence
+
+import numpy as np
+
+from d5rl.datasets.episode import Episode
+from d5rl.datasets.render_cache import check_render_args, ensure_render_cache
+from d5rl.envs.kitchen.subtasks import PARTIAL, SUBTASK_NAMES
+from d5rl.envs.kitchen.task import CAMERAS, KitchenEnv
+from d5rl.production.kitchen.demonstrator import Demonstrator
+
+COMBINATIONS: tuple[tuple[str, str, str, str], ...] = (
+    ("microwave", "kettle", "light switch", "slide cabinet"),
+    ("microwave", "kettle", "bottom burner", "top burner"),
+    ("microwave", "kettle", "bottom burner", "slide cabinet"),
+    ("microwave", "kettle", "bottom burner", "hinge cabinet"),
+    ("microwave", "kettle", "top burner", "light switch"),
+    ("microwave", "kettle", "top burner", "hinge cabinet"),
+    ("microwave", "kettle", "light switch", "hinge cabinet"),
+    ("microwave", "kettle", "slide cabinet", "hinge cabinet"),
+    ("microwave", "bottom burner", "top burner", "light switch"),
+    ("microwave", "bottom burner", "light switch", "slide cabinet"),
+    ("microwave", "top burner", "light switch", "slide cabinet"),
+    ("microwave", "light switch", "slide cabinet", "hinge cabinet"),
+    ("microwave", "bottom burner", "slide cabinet", "hinge cabinet"),
+    ("kettle", "bottom burner", "top burner", "light switch"),
+    ("kettle", "bottom burner", "light switch", "slide cabinet"),
+    ("kettle", "bottom burner", "slide cabinet", "hinge cabinet"),
+    ("kettle", "top burner", "light switch", "hinge cabinet"),
+    ("kettle", "light switch", "slide cabinet", "hinge cabinet"),
+    ("kettle", "bottom burner", "top burner", "hinge cabinet"),
+    ("bottom burner", "top burner", "light switch", "slide cabinet"),
+    ("bottom burner", "top burner", "slide cabinet", "hinge cabinet"),
+    ("top burner", "light switch", "slide cabinet", "hinge cabinet"),
+)
+assert all(set(c) != set(PARTIAL) for c in COMBINATIONS)
+MAX_STEPS = 280
+
+
+def order_probabilities(habit: float) -> list[float]:
+    """How often an operator with a habit performs each of :data:`COMBINATIONS`: at every choice of the
+    next subtask, the habitual one (the first in ``SUBTASK_NAMES`` order that continues some combination)
+    with probability ``habit``, each other possible one with an equal share of the rest."""
+    out = []
+    for combo in COMBINATIONS:
+        p = 1.0
+        for j in range(4):
+            options = sorted({c[j] for c in COMBINATIONS if c[:j] == combo[:j]}, key=SUBTASK_NAMES.index)
+            if len(options) > 1:
+                p *= habit if combo[j] == options[0] else (1.0 - habit) / (len(options) - 1)
+        out.append(p)
+    return out
+
+
+def combination_schedule(probabilities: Sequence[float], n: int) -> list[int]:
+    """The combination of each of the first ``n`` episodes: weighted round-robin (each episode goes to
+    the combination furthest behind its share), so every prefix of the dataset has the proportions
+    within one episode per combination, and episode ``i``'s combination does not depend on ``n``."""
+    credit = [0.0] * len(probabilities)
+    out = []
+    for _ in range(n):
+        credit = [c + p for c, p in zip(credit, probabilities)]
+        k = max(range(len(credit)), key=lambda j: (credit[j], -j))
+        credit[k] -= 1.0
+        out.append(k)
+    return out
+
+
+@functools.lru_cache(maxsize=4)
+def _schedule(habit: float, n: int) -> tuple[int, ...]:
+    return tuple(combination_schedule(order_probabilities(habit), n))
+
+
+def habit_schedule(habit: float, n: int) -> tuple[int, ...]:
+    """The combination index of each of the first (at least) ``n`` episodes of an operator with ``habit``
+    (computed in blocks of 1024)."""
+    return _schedule(float(habit), -(-n // 1024) * 1024)
+
+
+class KitchenStandardGenerator:
+    """Episode generator (see the module docstring)."""
+
+    # 2: integral action, wrist homing; 3: unwind before microwave/kettle; 4: straight reaches;
+    # 5: joint-space transits to inverse-kinematics solutions between subtasks
+    # 6: no detours via random points and no pauses (Style.sample): a unimodal BC could not follow them
+    version = "kitchen-standard-demos-6"
+    name = "d5rl.envs.kitchen.data:KitchenStandardGenerator"  # in the manifests (the code's first home)
+
+    def __init__(self, task_id: str | None = None, max_steps: int = MAX_STEPS, habit: float | None = None):
+        # None: combination ``index mod 22`` (the dataset); a probability: the combinations of an operator
+        # with that habit (habit_schedule), for docs/experiments/kitchen-learnability
+        self.habit = habit
+
+        self.env = KitchenEnv(obs_mode="state", tasks=COMBINATIONS[0])
+        self.max_steps = int(max_steps)
+
+    def episode(self, index: int, rng: np.random.Generator) -> Episode:
+        if self.habit is None:
+            combo_index = index % len(COMBINATIONS)
+        else:
+            combo_index = habit_schedule(self.habit, index + 1)[index]
+        return self.demonstrate(COMBINATIONS[combo_index], rng, meta={"combination": combo_index})
+
+    def demonstrate(self, subtasks: Sequence[str], rng: np.random.Generator, meta: dict | None = None) -> Episode:
+        env = self.env
+        cols = np.array([SUBTASK_NAMES.index(s) for s in subtasks])
+        env.reset(seed=int(rng.integers(2**31)))
+        policy = Demonstrator(env, subtasks, rng)
+        arrays = record_episode(env, policy, self.max_steps, cols)
+        solved = arrays["infos/completed"][:, cols].any(axis=0)
+        info = {
+            "subtasks": list(subtasks),
+            "solved": [s for s, ok in zip(subtasks, solved) if ok],
+            "num_solved": int(solved.sum()),
+            "style": dict(vars(policy.style)) if hasattr(policy.style, "__dict__") else {},
+        }
+        return Episode(arrays, {**(meta or {}), **info})
+
+
+def record_episode(env, policy, max_steps: int, cols, when_finished=None) -> dict[str, np.ndarray]:
+    """Step ``env`` with the demonstrator ``policy`` for at most ``max_steps`` and return the episode's
+    arrays (:func:`episode_arrays`). When the script is finished the episode ends, unless
+    ``when_finished(action)`` is given: it returns the action to keep stepping with."""
+    states, proprio, actions, completed = [env.get_state()], [env.data.qpos[:9].astype(np.float32)], [], []
+    for _ in range(max_steps):
+        action = policy.act()
+        if policy.finished:
+            if when_finished is None:
+                break
+            action = when_finished(action)
+        env.step(action)
+        actions.append(action)
+        states.append(env.get_state())
+        proprio.append(env.data.qpos[:9].astype(np.float32))
+        completed.append(env.completed())
+    return episode_arrays(states, proprio, actions, completed, cols)
+
+
+def episode_arrays(states, proprio, actions, completed, cols) -> dict[str, np.ndarray]:
+    """The stored arrays of one scripted kitchen episode (standard or randomized): T+1 states and
+    proprioception, T actions, rewards = how many of the target subtasks (``cols``) are done after each
+    step, ``infos/completed`` for every subtask; the episode ends in a timeout, never a terminal."""
+    t = len(actions)
+    completed = np.asarray(completed, dtype=bool).reshape(t, len(SUBTASK_NAMES))
+    timeouts = np.zeros(t, dtype=bool)
+    timeouts[-1] = True  # the demonstration ends here; no terminal state in the MDP
+    return {
+        "observations/proprio": np.asarray(proprio, dtype=np.float32),
+        "actions": np.asarray(actions, dtype=np.float32).reshape(t, 9),
+        "rewards": completed[:, cols].sum(axis=1).astype(np.float32),
+        "terminals": np.zeros(t, dtype=bool),
+        "timeouts": timeouts,
+        "states": np.asarray(states, dtype=np.float64),
+        "infos/completed": completed,
+    }
+
+
+def relabel(spec, arrays) -> dict[str, np.ndarray]:
+    """A task's rewards on the shared dataset: how many of *its* four subtasks are in their goal
+    configuration after each transition (``infos/completed``)."""
+    tasks = spec.env_kwargs["tasks"]
+    cols = [SUBTASK_NAMES.index(t) for t in tasks]
+    completed = np.asarray(arrays["infos/completed"])
+    return {"rewards": completed[:, cols].sum(axis=1).astype(np.float32)}
+
+
+def renders(
+    spec,
+    root,
+    manifest,
+    *,
+    episodes: int,
+    workers: int | None = None,
+    progress: bool = True,
+    cameras: Sequence[str] = CAMERAS,
+    size: int = 64,
+    render: bool = True,
+    check: bool = False,
+) -> list:
+    """``DatasetSpec.derived``: camera frames of the stored states (cached next to the dataset); for a
+    ``-state`` task, its state observations instead.
+
+    ``render=False`` loads states and proprioception only; ``check=True`` only checks the arguments."""
+    cameras, size = check_render_args(cameras, size, CAMERAS)
+    if check or not render:
+        return []
+
+    if spec is not None and spec.observation == "state":
+        return [
+            ensure_render_cache(
+                root,
+                manifest,
+                "d5rl.envs.kitchen.data:state_episode",
+                {},
+                name="state",
+                episodes=episodes,
+                workers=workers,
+                progress=progress,
+            )
+        ]
+
+    return [
+        ensure_render_cache(
+            root,
+            manifest,
+            "d5rl.envs.kitchen.data:render_episode",
+            {"cameras": tuple(cameras), "size": int(size)},
+            name=f"{'+'.join(cameras)}-{int(size)}x{int(size)}",
+            episodes=episodes,
+            workers=workers,
+            progress=progress,
+        )
+    ]
