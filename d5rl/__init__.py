@@ -6,10 +6,9 @@ env, dataset = d5rl.make("a1-walk-v0")
 
 from __future__ import annotations
 
-__version__ = "0.1.0"
-
 from d5rl.errors import D5RLError
 from d5rl.registry import episode_score, get_spec, list_tasks, make_env, normalize_score, parse_task_id, register_all
+from d5rl.version import __version__
 
 # Every task is a Gymnasium id from here on: gymnasium.make("d5rl/a1-walk-v0") works after `import d5rl`.
 # (Registration imports no MuJoCo and no JAX; XLA flags are set only by d5rl.agents, where d5rl trains.)
@@ -18,7 +17,7 @@ register_all()
 
 def load_dataset(task_id: str, **kwargs):
     """The task's offline dataset (see :func:`d5rl.datasets.loading.load_dataset`)."""
-    from d5rl.datasets.loading import load_dataset as _load
+    from d5rl.datasets.loading import load_dataset as _load  # start-up time: `import d5rl` stays light
 
     return _load(task_id, **kwargs)
 

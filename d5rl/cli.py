@@ -318,7 +318,7 @@ _PLUGINS = [
     ("d5rl.runner.cli", "add_report_parser"),
     ("d5rl.browse.server", "add_browse_parser"),
     ("d5rl.production.kitchen.human", "add_import_kitchen_human_parser"),
-    ("d5rl.envs.a1.calibrate", "add_calibrate_parser"),
+    ("d5rl.production.a1.calibrate", "add_calibrate_parser"),
 ]
 
 

@@ -17,7 +17,7 @@ the instructions the CPU has:
   FMA and has no ``cpuid`` dispatch (``objdump -d libmujoco.so``: no ``vfmadd``, no ``zmm``, no
   ``cpuid``); its transcendental functions are libm's, pinned above.
 - XLA is not on the generation path: the A1 data agents' policies run in numpy
-  (:mod:`d5rl.envs.a1.policy`).
+  (:mod:`d5rl.production.a1.policy`).
 
 A process is *portable* when it started with these variables and the marker
 ``D5RL_NUMERICS=portable``, and numpy and OpenBLAS report the pinned kernels

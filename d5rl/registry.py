@@ -17,12 +17,13 @@ from __future__ import annotations
 import dataclasses
 import difflib
 import importlib
+import importlib.util
 import pkgutil
 import re
 from collections.abc import Callable
 from typing import Any
 
-from d5rl.errors import TaskIdError, UnknownTaskError
+from d5rl.errors import D5RLError, TaskIdError, UnknownTaskError
 
 TASK_ID_RE = re.compile(r"^(?P<family>[a-z0-9]+)-(?P<name>[a-z0-9]+(?:-[a-z0-9]+)*)-v(?P<version>\d+)$")
 
@@ -238,9 +239,9 @@ def _load_families() -> None:
     global _LOADED
     if _LOADED:
         return
-    import d5rl.envs as envs_pkg
-
-    for info in sorted(pkgutil.iter_modules(envs_pkg.__path__), key=lambda i: i.name):
+    # The families are plug-ins found by name, like a task's entry point: the registry sits below d5rl.envs.
+    families = importlib.util.find_spec("d5rl.envs").submodule_search_locations
+    for info in sorted(pkgutil.iter_modules(families), key=lambda i: i.name):
         if info.ispkg:
             try:
                 importlib.import_module(f"d5rl.envs.{info.name}.registration")
@@ -310,8 +311,6 @@ def episode_score(task_id: str, episode_return: float, final_info: dict) -> floa
 
 def normalize_score(task_id: str, raw_return):
     """Map a raw episode return to the task's normalized score (0 random, 1 expert)."""
-    from d5rl.errors import D5RLError
-
     spec = get_spec(task_id)
     if spec.score_from == "info":
         raise D5RLError(

@@ -1,6 +1,6 @@
 """Headless rendering: pick a GL backend and make renderers with clear errors.
 
-``MUJOCO_GL`` must be set before mujoco is imported; :mod:`d5rl.envs` defaults it
+``MUJOCO_GL`` must be set before mujoco is imported; :mod:`d5rl.gl` defaults it
 to ``egl`` on Linux (Mesa's llvmpipe works without a GPU).  ``osmesa`` is the fallback.
 """
 
@@ -11,7 +11,7 @@ import os
 import mujoco
 import numpy as np
 
-import d5rl.envs
+from d5rl import gl
 from d5rl.errors import RenderBackendError
 
 _HINT = (
@@ -22,8 +22,8 @@ _HINT = (
 
 def make_renderer(model: mujoco.MjModel, height: int, width: int) -> mujoco.Renderer:
     """A ``mujoco.Renderer`` whose offscreen buffer is grown to fit ``height x width``."""
-    if d5rl.envs.GL_PROBLEM is not None:
-        raise RenderBackendError(f"cannot render: {d5rl.envs.GL_PROBLEM}", _HINT)
+    if gl.GL_PROBLEM is not None:
+        raise RenderBackendError(f"cannot render: {gl.GL_PROBLEM}", _HINT)
     model.vis.global_.offheight = max(int(model.vis.global_.offheight), int(height))
     model.vis.global_.offwidth = max(int(model.vis.global_.offwidth), int(width))
     try:

@@ -15,6 +15,8 @@ from pathlib import Path
 
 import numpy as np
 
+from d5rl.errors import D5RLError
+
 QUALITIES = ("fast", "full")
 VIDEO_SUFFIXES = (".mp4", ".mkv", ".mov", ".avi", ".gif")  # what write_video encodes (.webm silently fails)
 
@@ -23,8 +25,6 @@ def check_video_path(path: str | Path) -> Path:
     """A video's path, checked before anything is rendered: a container :func:`write_video` encodes, in
     a directory that can be written (created if missing)."""
     import os
-
-    from d5rl.errors import D5RLError
 
     path = Path(path).expanduser()
     if path.suffix.lower() not in VIDEO_SUFFIXES:
@@ -58,9 +58,9 @@ class FrameRenderer:
         self.off: tuple = ()
         if not hasattr(self.base, "render_camera") or not hasattr(self.base, "model"):
             return
-        import mujoco
+        import mujoco  # start-up time: MuJoCo and the GL backend load only for envs that render
 
-        from d5rl.rendering import make_renderer
+        from d5rl.rendering import make_renderer  # start-up time, as mujoco
 
         h, w = size if size is not None else self.base.render_size
         vis = self.base.model.vis.quality

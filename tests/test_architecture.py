@@ -161,13 +161,17 @@ def test_every_unit_has_a_floor():
     assert sorted({_unit(m) for m in MODULES} - set(FLOOR)) == []
 
 
-# Today: envs hold data production (generators import d5rl.datasets, the A1 trainer d5rl.agents and
-# d5rl.training), datasets/probe.py imports d5rl.training, rendering imports d5rl.envs, registry imports
-# d5rl.envs; circles envs/a1/agents <-> buffers, runner/report <-> videos, settings <-> training.
-PENDING = pytest.mark.xfail(strict=True, reason="envs hold data production (issue 72)")
+# What the run pipeline (runner, training, settings, CLI, browse) still has: one circle between files and
+# one between units, and function-local imports without a reason.  The tests fail as soon as one of them
+# is gone, so that it comes off these lists.
+KNOWN_CIRCLES = {
+    "file": [["d5rl.runner.report", "d5rl.runner.videos"]],
+    "unit": [["d5rl.settings", "d5rl.training"]],
+    "family": [["d5rl.settings", "d5rl.training"]],
+}
+SILENT_LAZY_IMPORTS_LEFT = ("d5rl.browse", "d5rl.cli", "d5rl.runner", "d5rl.settings", "d5rl.training")
 
 
-@PENDING
 def test_imports_run_down_the_floors():
     upward = [
         f"{imp} ({_unit(imp.source)} floor {FLOOR[_unit(imp.source)]} -> {_unit(imp.target)} "
@@ -178,18 +182,17 @@ def test_imports_run_down_the_floors():
     assert upward == []
 
 
-@PENDING
 @pytest.mark.parametrize("level", ["file", "unit", "family"])
 def test_no_import_circles(level):
     key = {"file": lambda m: m, "unit": _unit, "family": lambda m: _folder(m, 3)}[level]
-    assert _cycles({(key(i.source), key(i.target)) for i in IMPORTS}) == []
+    assert _cycles({(key(i.source), key(i.target)) for i in IMPORTS}) == KNOWN_CIRCLES[level]
 
 
-@PENDING
 def test_function_local_imports_say_why():
     """A function-local import is for an optional dependency or for start-up time, and its comment says so."""
-    silent = [repr(i) for i in IMPORTS if i.local and not i.commented]
-    assert silent == []
+    silent = [i for i in IMPORTS if i.local and not i.commented]
+    assert [repr(i) for i in silent if _unit(i.source) not in SILENT_LAZY_IMPORTS_LEFT] == []
+    assert sorted({_unit(i.source) for i in silent}) == sorted(SILENT_LAZY_IMPORTS_LEFT)
 
 
 def test_the_checks_can_fail():

@@ -332,7 +332,7 @@ def test_a_bad_mujoco_gl_does_not_break_list_and_rendering_says_why(tmp_path, va
     )
     assert render.returncode != 0 and needle in render.stderr.splitlines()[-1], render.stderr[-2000:]
     # a worker process inherits MUJOCO_GL=disable and the reason with it
-    child = "import d5rl.envs; print(d5rl.envs.GL_PROBLEM)"
+    child = "import d5rl.envs, d5rl.gl; print(d5rl.gl.GL_PROBLEM)"
     worker = subprocess.run(
         [
             sys.executable,
@@ -350,7 +350,7 @@ def test_a_bad_mujoco_gl_does_not_break_list_and_rendering_says_why(tmp_path, va
 
 
 def test_a_gl_backend_whose_library_is_missing_is_named():
-    from d5rl.envs import gl_problem
+    from d5rl.gl import gl_problem
 
     assert gl_problem("egl", loadable=lambda *a: True) is None
     assert gl_problem("osmesa", loadable=lambda *a: False) == "MUJOCO_GL=osmesa needs libOSMesa, which is not installed"

@@ -14,7 +14,7 @@ from __future__ import annotations
 
 import importlib
 
-from d5rl.errors import D5RLError
+from d5rl.errors import D5RLError, MissingDependencyError
 from d5rl.xla_flags import configure_default_flags
 
 configure_default_flags()  # d5rl trains from here on: its XLA:CPU flags, before JAX starts (never the user's)
@@ -53,8 +53,6 @@ def get_agent(name: str):
     try:
         module = importlib.import_module(AGENTS[key][0])
     except ImportError as e:  # jax/flax/optax missing
-        from d5rl.errors import MissingDependencyError
-
         raise MissingDependencyError(
             f"agent {key} needs JAX, Flax and Optax ({e})", "install the training extra: pip install 'd5rl[train]'"
         ) from e

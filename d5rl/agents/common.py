@@ -19,6 +19,8 @@ import optax
 from flax.training.train_state import TrainState
 
 from d5rl.agents.config import Config
+from d5rl.agents.encoders import make_encoder
+from d5rl.agents.networks import Critic, GaussianPolicy, Temperature
 
 
 def nonpytree_field(**kwargs):
@@ -227,9 +229,6 @@ def release_actor_decay(cls, config: Config, *, offline_steps: int, online_steps
 def sac_train_states(config: Config, keys, ex_obs, ex_act, critic_dropout: float | None = None):
     """``(actor, critic, temperature)`` train states of a SAC-style agent (CQL, CalQL, RLPD): a tanh-squashed
     Gaussian policy, a critic ensemble and the entropy temperature, from three keys."""
-    from d5rl.agents.encoders import make_encoder
-    from d5rl.agents.networks import GaussianPolicy, Temperature
-
     k_actor, k_critic, k_temp = keys
     actor_def = GaussianPolicy(
         make_encoder(config),
@@ -249,9 +248,6 @@ def sac_train_states(config: Config, keys, ex_obs, ex_act, critic_dropout: float
 
 def sac_critic(config: Config, critic_dropout: float | None = None, num_qs: int | None = None):
     """The critic ensemble module of :func:`sac_train_states` (``num_qs`` members; default ``config.num_qs``)."""
-    from d5rl.agents.encoders import make_encoder
-    from d5rl.agents.networks import Critic
-
     return Critic(
         make_encoder(config),
         config.hidden_dims,

@@ -18,6 +18,7 @@ import numpy as np
 
 from d5rl.datasets.chunks import gather_rows
 from d5rl.datasets.episode import Episode
+from d5rl.datasets.generation import _concat
 from d5rl.errors import DatasetCorruptError
 
 
@@ -135,8 +136,6 @@ class Dataset:
     @classmethod
     def from_episodes(cls, episodes: list[Episode], metadata: dict | None = None, **kwargs) -> Dataset:
         """An in-memory dataset from a list of episodes (tests, toy problems, conversions)."""
-        from d5rl.datasets.generation import _concat
-
         for ep in episodes:
             ep.validate()
         arrays, aligns = _concat(list(episodes))

@@ -26,7 +26,9 @@ from pathlib import Path
 import gymnasium as gym
 import numpy as np
 
+from d5rl.datasets.loading import load_dataset
 from d5rl.errors import D5RLError, MissingDependencyError
+from d5rl.progress import progress_bar
 from d5rl.registry import get_spec, minari_env_id, parse_task_id, resolve
 
 SEP = "__"
@@ -122,8 +124,6 @@ def export_minari(
         from minari.data_collector import EpisodeBuffer
     except ImportError as e:
         raise MissingDependencyError("Minari export needs the `minari` package", "pip install 'd5rl[export]'") from e
-    from d5rl.datasets.loading import load_dataset
-    from d5rl.progress import progress_bar
 
     spec = get_spec(task)
     tid = parse_task_id(spec.id)

@@ -50,6 +50,7 @@ import numpy as np
 from d5rl.datasets import chunks, lock
 from d5rl.errors import D5RLError, DatasetCorruptError, DatasetVersionError, is_int
 from d5rl.files import dump_json, json_type_error, owner_tag, read_json, write_atomic
+from d5rl.version import __version__
 
 FORMAT_VERSION = 1
 MANIFEST = "manifest.json"
@@ -487,10 +488,8 @@ def package_versions() -> dict[str, str]:
     import gymnasium
     import mujoco
 
-    import d5rl
-
     return {
-        "d5rl": d5rl.__version__,
+        "d5rl": __version__,
         "mujoco": mujoco.__version__,
         "numpy": np.__version__,
         "gymnasium": gymnasium.__version__,

@@ -23,7 +23,7 @@ from d5rl import numerics, parallel, paths
 from d5rl.datasets import format as fmt
 from d5rl.datasets import lock
 from d5rl.datasets.episode import Episode
-from d5rl.errors import D5RLError, DatasetCorruptError, DatasetVersionError, is_int
+from d5rl.errors import D5RLError, DatasetCorruptError, DatasetNotFoundError, DatasetVersionError, is_int
 from d5rl.files import dump_json, json_default
 from d5rl.progress import progress_bar
 from d5rl.registry import DatasetSpec, TaskSpec, get_spec, resolve
@@ -58,8 +58,6 @@ def full_size(dspec: DatasetSpec) -> int:
 
 def not_imported_error(spec: TaskSpec, dspec: DatasetSpec) -> D5RLError:
     """The one-line error for an imported dataset that is not on disk (d5rl cannot make it)."""
-    from d5rl.errors import DatasetNotFoundError
-
     how = resolve(dspec.importer).how
     return DatasetNotFoundError(
         f"{spec.id} trains on imported data ({dspec.name}), which is not in {dataset_root(dspec)}", how

@@ -13,7 +13,7 @@ from typing import Any
 import numpy as np
 
 from d5rl.datasets import format as fmt
-from d5rl.datasets import lock
+from d5rl.datasets import generation, lock
 from d5rl.datasets.dataset import ChunkedArray, Dataset
 from d5rl.errors import D5RLError, DatasetArgumentError, DatasetCorruptError, DatasetNotFoundError
 from d5rl.registry import TaskSpec, get_spec, resolve
@@ -88,8 +88,6 @@ def load_dataset(
     when ``generate`` is true (with a one-line warning), else raises
     :class:`~d5rl.errors.DatasetCorruptError`.
     """
-    from d5rl.datasets import generation
-
     spec = get_spec(task)
     dspec = generation.dataset_spec(spec)
     if dspec.imported:
@@ -133,8 +131,6 @@ def _imported_spec(spec: TaskSpec, dspec, seed):
     """An imported dataset's spec with its full size as imported (d5rl cannot make more); one-line
     errors when it was not imported, or for a seed (imported data has none)."""
     import dataclasses
-
-    from d5rl.datasets import generation
 
     if seed is not None and seed != dspec.default_seed:
         raise DatasetArgumentError(
@@ -187,8 +183,6 @@ def _manifest(path: Path, spec: TaskSpec, dspec) -> dict:
 
 
 def _open(spec, dspec, seed, root, wanted, partial, in_memory, limit, obs_keys, workers, progress, derived_kwargs):
-    from d5rl.datasets import generation
-
     manifest_path = root / fmt.MANIFEST
     have = _manifest(manifest_path, spec, dspec)["num_episodes"] if manifest_path.exists() else 0
     if have < wanted and dspec.imported:

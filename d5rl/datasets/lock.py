@@ -24,6 +24,8 @@ import threading
 from collections.abc import Iterator
 from pathlib import Path
 
+from d5rl.errors import D5RLError
+
 try:
     import fcntl
 except ImportError:  # pragma: no cover - Windows: no locking (MuJoCo's EGL path is Linux-only anyway)
@@ -92,8 +94,6 @@ def _refuse_waiting_on_parent(root: Path) -> None:
     with contextlib.suppress(OSError, ValueError, IndexError):
         holder = int((root / WRITE_LOCK).read_text().split()[0])
         if holder == os.getppid() and getattr(mp.current_process(), "_inheriting", False):
-            from d5rl.errors import D5RLError
-
             err = D5RLError(
                 "a d5rl worker process re-ran the main script, which calls d5rl at top level",
                 'put the script\'s code under `if __name__ == "__main__":` (worker processes import '

@@ -23,9 +23,12 @@ from pathlib import Path
 
 import numpy as np
 
+from d5rl import numerics
 from d5rl.datasets import format as fmt
+from d5rl.datasets.generation import dataset_root, dataset_spec, generate
 from d5rl.errors import D5RLError
 from d5rl.files import dump_json
+from d5rl.registry import get_spec, list_tasks
 
 REFERENCES = Path(__file__).with_name("references.json")
 WHOLE = ("toy-reach", "toy-reach-pixels")  # generated whole by the test suite: referenced whole
@@ -150,8 +153,6 @@ def compare(root: Path, ref: dict) -> Comparison:
 
 def compare_task(task, seed: int | None = None, references: dict | None = None) -> Comparison:
     """The dataset of ``task`` on disk (at ``seed``) against its committed reference."""
-    from d5rl.datasets.generation import dataset_root, dataset_spec
-
     dspec = dataset_spec(task)
     refs = load_references() if references is None else references
     if dspec.name not in refs:
@@ -177,8 +178,6 @@ def dataset_tasks() -> dict[str, str]:
     """Every dataset of d5rl's task families that d5rl can generate now, with the first task (by id) that
     uses it. Without a reference: imported datasets (their bytes are a download's), datasets marked
     unavailable (e.g. their data agents are not trained yet) and tasks registered from outside d5rl."""
-    from d5rl.registry import get_spec, list_tasks
-
     out = {}
     for task in list_tasks():
         spec = get_spec(task)
@@ -196,9 +195,6 @@ def dataset_tasks() -> dict[str, str]:
 
 def record(names: list[str], path: Path = REFERENCES, workers: int = 1) -> None:
     """Generate each dataset's reference prefix in a temporary ``D5RL_HOME`` and write its entry."""
-    from d5rl import numerics
-    from d5rl.datasets.generation import dataset_spec, generate
-
     tasks = dataset_tasks()
     unknown = [n for n in names if n not in tasks]
     if unknown:

@@ -36,6 +36,8 @@ import numpy as np
 from d5rl import parallel
 from d5rl.datasets import format as fmt
 from d5rl.datasets import lock
+from d5rl.errors import DatasetArgumentError, is_int
+from d5rl.progress import progress_bar
 from d5rl.registry import resolve
 
 RENDERS_DIR = "renders"
@@ -45,8 +47,6 @@ FRAME_SIZES = (8, 1024)  # the smallest and largest square frame a cache renders
 def check_render_args(cameras, size: int, available: tuple[str, ...] | None = None) -> tuple[tuple[str, ...], int]:
     """A cache's camera names and frame size, checked before any work (a family's ``derived`` builder
     calls this first): ``cameras`` a non-empty list of distinct names from ``available``."""
-    from d5rl.errors import DatasetArgumentError, is_int
-
     if available is not None and (
         isinstance(cameras, str)
         or not isinstance(cameras, (list, tuple))
@@ -194,8 +194,6 @@ def ensure_render_cache(
             )
         bar = None
         if progress and (jobs or migrate):
-            from d5rl.progress import progress_bar
-
             bar = progress_bar(total=todo_eps, desc=f"rendering {name}", unit="ep")
         try:
             for func, todo in ((compress_shard, migrate), (render_shard, jobs)):

@@ -5,14 +5,13 @@ from __future__ import annotations
 from pathlib import Path
 
 from d5rl.datasets import format as fmt
+from d5rl.datasets import generation
 from d5rl.errors import D5RLError
 
 
 def dataset_status(spec) -> tuple[str, dict | None]:
     """``(status, manifest)``: "ready", "partial (N ep)", "stale (...)", "not generated", ... and the
     manifest when one could be read."""
-    from d5rl.datasets import generation
-
     if spec.dataset is None:
         return "-", None
     if spec.dataset.unavailable:

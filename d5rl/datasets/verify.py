@@ -9,7 +9,8 @@ from pathlib import Path
 from d5rl.datasets import format as fmt
 from d5rl.datasets.generation import check_current, dataset_root, dataset_spec
 from d5rl.errors import D5RLError
-from d5rl.registry import TaskSpec, get_spec
+from d5rl.progress import progress_bar
+from d5rl.registry import TaskSpec, get_spec, resolve
 
 
 @dataclasses.dataclass
@@ -26,8 +27,6 @@ class VerifyReport:
 def regenerate_command(task_id: str, seed: int | None = None) -> str:
     """The command that regenerates what verification finds missing or damaged (intact shards are kept);
     for an imported dataset, the command that imports it again."""
-    from d5rl.registry import resolve
-
     dspec = get_spec(task_id).dataset
     if dspec is not None and dspec.imported:
         return resolve(dspec.importer).command
@@ -64,8 +63,6 @@ def verify_dataset(task: str | TaskSpec, seed: int | None = None, progress: bool
         dirs += [(d, None) for d in fmt.iter_shard_dirs(render_root)]
     it = dirs
     if progress:
-        from d5rl.progress import progress_bar
-
         it = progress_bar(dirs, unit="shard", desc=f"verify {root.parent.name}")
     for d, entry in it:
         problems += fmt.verify_shard(d, entry)

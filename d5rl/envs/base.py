@@ -13,7 +13,7 @@ import gymnasium as gym
 import mujoco
 import numpy as np
 
-from d5rl.errors import D5RLError
+from d5rl.errors import D5RLError, is_int
 from d5rl.rendering import make_renderer
 
 # What a dataset stores per step to replay or re-render exactly: time, qpos, qvel,
@@ -38,8 +38,6 @@ class ActionError(D5RLError, ValueError):
 def frame_size(render_size: tuple[int, int], width: int | None = None, height: int | None = None) -> tuple[int, int]:
     """``(height, width)`` of ``render()``'s frames: ``render_size``, with Gymnasium's ``width`` / ``height``
     keywords (as its MuJoCo envs take them) overriding either side."""
-    from d5rl.errors import is_int
-
     size = (int(height) if height is not None else render_size[0], int(width) if width is not None else render_size[1])
     for name, v in (("height", height), ("width", width)):
         if v is not None and not is_int(v, lo=1, hi=8192):

@@ -24,7 +24,7 @@ def env_factory(task_id: str, frame_stack: int = 1, render_mode: str | None = No
 
 
 def load_task_dataset(task_id: str, **kwargs):
-    from d5rl import load_dataset
+    from d5rl.datasets.loading import load_dataset
 
     return load_dataset(task_id, **kwargs)
 

@@ -6,7 +6,7 @@ import dataclasses
 import json
 from pathlib import Path
 
-from d5rl.envs.a1.buffers import num_episodes
+from d5rl.envs.a1.published import TRAIN, buffer_episodes
 from d5rl.registry import DatasetSpec, ScoreRef, TaskSpec, register
 
 ENTRY = "d5rl.envs.a1.task:A1Env"
@@ -31,7 +31,7 @@ def _ref(task_id: str, scores: dict) -> ScoreRef | None:
     return ScoreRef(s["random"], s["expert"], s["source"], expert_note=note)
 
 
-SPEED_AGENTS = ("speed-0.5", "speed-0.8", "speed-1.0")  # data agents (agents.AGENTS says what each does)
+SPEED_AGENTS = ("speed-0.5", "speed-0.8", "speed-1.0")  # data agents (d5rl.production.a1.agents.AGENTS)
 HIKING_AGENTS = ("heading",)
 # the agents each task's expert reference is the best of: its data agents and the reference agents trained for it
 SCORE_AGENTS = {
@@ -43,8 +43,8 @@ SCORE_AGENTS = {
 LOCOMOTION_DATA = DatasetSpec(
     name="a1-locomotion",
     version=1,  # 1: the retrained agents (83,750 steps each, speed-band reward; was 30,000 steps)
-    generator="d5rl.envs.a1.data:ReplayBufferGenerator",
-    num_episodes=num_episodes(SPEED_AGENTS),
+    generator="d5rl.production.a1.data:ReplayBufferGenerator",
+    num_episodes=buffer_episodes(SPEED_AGENTS),
     episodes_per_shard=8,
     generator_kwargs={"agents": SPEED_AGENTS},
     description="replay buffers of three SAC agents trained to track 0.5, 0.8 and 1.0 m/s "
@@ -54,8 +54,8 @@ LOCOMOTION_DATA = DatasetSpec(
 HIKING_DATA = DatasetSpec(
     name="a1-hiking",
     version=1,  # 1: the retrained heading agent (145,000 steps on the doubling segment schedule; was 30,000)
-    generator="d5rl.envs.a1.data:ReplayBufferGenerator",
-    num_episodes=num_episodes(HIKING_AGENTS),
+    generator="d5rl.production.a1.data:ReplayBufferGenerator",
+    num_episodes=buffer_episodes(HIKING_AGENTS),
     episodes_per_shard=8,
     generator_kwargs={"agents": HIKING_AGENTS},
     description="replay buffer of a direction-conditioned SAC agent on flat ground",
@@ -71,7 +71,7 @@ for task_id, speed, dataset in (("a1-walk-v0", 0.75, LOCOMOTION_DATA), ("a1-run-
             env_kwargs={"target_speed": speed},
             description=f"Unitree A1 tracking {speed} m/s on flat ground (20 Hz PD position control)",
             dataset=dataset,
-            relabel="d5rl.envs.a1.data:relabel_speed",
+            relabel="d5rl.production.a1.data:relabel_speed",
             score=_ref(task_id, _scores_table),
             score_definition="(return - random policy return) / (expert return - random policy return); "
             "expert = the best of the data agents and the reference agent run-1.25 "
@@ -87,7 +87,7 @@ register(
         env_kwargs={"target_speed": 0.75, "terrain": "course", "command": "waypoints"},
         description="Unitree A1 walking a generated hiking course (bumps, ramps, waypoints); data from flat ground",
         dataset=HIKING_DATA,
-        relabel="d5rl.envs.a1.data:relabel_hiking",
+        relabel="d5rl.production.a1.data:relabel_hiking",
         score=_ref("a1-hiking-v0", _scores_table),
         score_definition="(return - random policy return) / (expert return - random policy return); "
         "expert = the best of the data agent 'heading' and the reference agent 'hiking' "
@@ -97,7 +97,7 @@ register(
 )
 
 # v1: the release's action range, reward, start and hiking course (d5rl.envs.a1.v1).  Their datasets replay
-# the v1 data agents, which must be trained and published first (d5rl.envs.a1.experts).
+# the v1 data agents, which must be trained and published first (d5rl.production.a1.experts).
 SPEED_AGENTS_V1 = ("speed-0.5-v1", "speed-0.8-v1", "speed-1.0-v1")
 HIKING_AGENTS_V1 = ("goals-mixed-v1",)
 SCORE_AGENTS.update(
@@ -107,22 +107,22 @@ SCORE_AGENTS.update(
         "a1-hiking-v1": ("goals-mixed-v1", "goals-smooth-v1", "hiking-v1"),
     }
 )
-TRAIN_V1 = "python -m d5rl.envs.a1.experts train --agents {agents} (then `publish`; docs/datacards/a1.md, v1)"
+TRAIN_V1 = TRAIN + " (then `publish`; docs/datacards/a1.md, v1)"
 
 
 def _unavailable(agents: tuple[str, ...]) -> str | None:
-    if num_episodes(agents):
+    if buffer_episodes(agents):
         return None
     return "the v1 A1 data agents are not published yet; train them: " + TRAIN_V1.format(agents=" ".join(agents))
 
 
 # each episode's scene (floor, friction, mass, goals) is drawn at reset: replays rebuild it from the stored seed
-REPLAY_V1 = "d5rl.envs.a1.data:replay_env"
+REPLAY_V1 = "d5rl.production.a1.data:replay_env"
 LOCOMOTION_DATA_V1 = DatasetSpec(
     name="a1-v1-locomotion",
     version=1,
-    generator="d5rl.envs.a1.data:ReplayBufferGenerator",
-    num_episodes=num_episodes(SPEED_AGENTS_V1),
+    generator="d5rl.production.a1.data:ReplayBufferGenerator",
+    num_episodes=buffer_episodes(SPEED_AGENTS_V1),
     episodes_per_shard=8,
     generator_kwargs={"agents": SPEED_AGENTS_V1},
     description="replay buffers of three SAC agents trained on the release's run task to track 0.5, 0.8 "
@@ -134,8 +134,8 @@ LOCOMOTION_DATA_V1 = DatasetSpec(
 HIKING_DATA_V1 = DatasetSpec(
     name="a1-v1-hiking",
     version=1,
-    generator="d5rl.envs.a1.data:ReplayBufferGenerator",
-    num_episodes=num_episodes(HIKING_AGENTS_V1),
+    generator="d5rl.production.a1.data:ReplayBufferGenerator",
+    num_episodes=buffer_episodes(HIKING_AGENTS_V1),
     episodes_per_shard=8,
     generator_kwargs={"agents": HIKING_AGENTS_V1},
     description="replay buffer of a SAC agent running toward random goals (the release's RunToward: "
@@ -150,7 +150,7 @@ HIKING_SMOOTH_AGENTS_V1 = ("goals-smooth-v1",)
 HIKING_SMOOTH_DATA_V1 = dataclasses.replace(
     HIKING_DATA_V1,
     name="a1-v1-hiking-smooth",
-    num_episodes=num_episodes(HIKING_SMOOTH_AGENTS_V1),
+    num_episodes=buffer_episodes(HIKING_SMOOTH_AGENTS_V1),
     generator_kwargs={"agents": HIKING_SMOOTH_AGENTS_V1},
     description="replay buffer of a SAC agent running toward random goals on the plane (the release's "
     "RunToward, smooth floor only)",
@@ -165,7 +165,7 @@ for task_id, speed in (("a1-walk-v1", 0.75), ("a1-run-v1", 1.25)):
             env_kwargs={"task": "run", "target_speed": speed},
             description=f"Unitree A1 tracking {speed} m/s on flat ground, as the D5RL release defines it",
             dataset=LOCOMOTION_DATA_V1,
-            relabel="d5rl.envs.a1.data:relabel_speed",
+            relabel="d5rl.production.a1.data:relabel_speed",
             score=_ref(task_id, _scores_table),
             score_definition="(return - random policy return) / (expert return - random policy return)",
             group="a1",
@@ -180,7 +180,7 @@ register(
         description="Unitree A1 hiking the release's course (redrawn per episode) through four waypoints at 1 m/s",
         dataset=HIKING_DATA_V1,
         dataset_variants={"smooth": HIKING_SMOOTH_DATA_V1},  # a1-hiking-smooth-v1
-        relabel="d5rl.envs.a1.data:relabel_hiking",
+        relabel="d5rl.production.a1.data:relabel_hiking",
         score=_ref("a1-hiking-v1", _scores_table),
         score_definition="(return - random policy return) / (expert return - random policy return)",
         group="a1",

@@ -56,6 +56,7 @@ from gymnasium import spaces
 from d5rl.envs.base import MujocoEnv
 from d5rl.envs.kitchen import model as km
 from d5rl.envs.kitchen.subtasks import MIXED, SUBTASK_NAMES, SUBTASKS, CompletionChecker
+from d5rl.errors import D5RLError
 
 FRAME_SKIP = 40  # 40 x 2 ms = 0.08 s control step
 ACTION_SCALE = 2.0  # rad/s (m/s for fingers) at |action| = 1
@@ -89,8 +90,6 @@ class KitchenEnv(MujocoEnv):
         width: int | None = None,
         height: int | None = None,
     ):
-        from d5rl.errors import D5RLError
-
         unknown = [t for t in tasks if t not in SUBTASKS]
         if unknown:
             raise D5RLError(f"unknown kitchen subtasks {unknown}", f"choose from {list(SUBTASK_NAMES)}")

@@ -31,7 +31,7 @@ class ToyReachEnv(gym.Env):
         width: int | None = None,
         height: int | None = None,
     ):
-        from d5rl.envs.base import frame_size
+        from d5rl.envs.base import frame_size  # start-up time: the numpy toy does not load MuJoCo (base does)
 
         if render_mode is not None and render_mode not in self.metadata["render_modes"]:
             raise ValueError(f"render_mode must be one of {self.metadata['render_modes']}, got {render_mode!r}")

@@ -12,6 +12,7 @@ import numpy as np
 
 from d5rl.envs.widowx.model import CATEGORY, POOL, SHOES, TOYS
 from d5rl.envs.widowx.tabletop import KEY_LIGHT_POS, SIDE_CAMERA, SURFACE_TEXTURES, lookat_quat, texture_name
+from d5rl.errors import DatasetVersionError
 
 # Per-episode ranges (the paper: "textures, lighting conditions, and camera angles are also varied
 # across episodes"; its figure shows small changes of viewpoint).
@@ -52,8 +53,6 @@ class Domain:
     def from_json(cls, d: dict[str, Any]) -> Domain:
         fields = {f.name for f in dataclasses.fields(cls)}
         if set(d) != fields:
-            from d5rl.errors import DatasetVersionError
-
             raise DatasetVersionError(
                 f"this WidowX episode's domain differs from the current scene's in fields {sorted(set(d) ^ fields)}: "
                 "it comes from an older dataset version",

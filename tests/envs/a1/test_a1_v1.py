@@ -344,7 +344,9 @@ def test_v1_dataset_fails_first_with_one_line_until_its_agents_are_published():
         pytest.skip("the v1 data agents are published")
     with pytest.raises(d5rl.D5RLError) as e:
         d5rl.make("a1-walk-v1")
-    assert "\n" not in str(e.value) and "python -m d5rl.envs.a1.experts train --agents speed-0.5-v1" in str(e.value)
+    assert "\n" not in str(e.value) and "python -m d5rl.production.a1.experts train --agents speed-0.5-v1" in str(
+        e.value
+    )
     from d5rl.runner.cli import resolve_tasks
 
     assert "a1-walk-v1" not in resolve_tasks(["a1"]) and resolve_tasks(["a1-walk-v1"]) == ["a1-walk-v1"]
@@ -360,7 +362,7 @@ def test_v1_dataset_fails_first_with_one_line_until_its_agents_are_published():
 )
 def test_relabelling_the_data_agents_infos_gives_the_tasks_reward(task, agent_env):
     """The v1 datasets store the data agents' reward terms; each task recomputes its reward from them."""
-    from d5rl.envs.a1 import data
+    from d5rl.production.a1 import data
 
     spec = d5rl.get_spec(task)
     relabel = getattr(data, spec.relabel.split(":")[1])

@@ -33,6 +33,7 @@ import numpy as np
 from d5rl.envs.kitchen import model as km
 from d5rl.envs.kitchen.randomized import objects, textures
 from d5rl.envs.kitchen.randomized.objects import NUM_KETTLES, NUM_MICROWAVES
+from d5rl.errors import D5RLError
 
 MAX_EXTRA_LIGHTS = 3
 # Kettle start sites: (dx, dy) m of the kettle from its stock pose (on the bottom-left burner).
@@ -143,8 +144,6 @@ class Domain:
 
     @classmethod
     def from_json(cls, d: dict) -> Domain:
-        from d5rl.errors import D5RLError
-
         def tup(x):
             return tuple(tup(v) for v in x) if isinstance(x, (list, tuple)) else x
 

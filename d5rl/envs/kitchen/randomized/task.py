@@ -53,6 +53,7 @@ from d5rl.envs.kitchen.randomized.domain import (
 )
 from d5rl.envs.kitchen.subtasks import MIXED
 from d5rl.envs.kitchen.task import KitchenEnv
+from d5rl.errors import D5RLError
 from d5rl.rendering import sync_materials
 
 CAMERAS = ("left", "right", "wrist")
@@ -75,8 +76,6 @@ class RandomizedKitchenEnv(KitchenEnv):
         width: int | None = None,
         height: int | None = None,
     ):
-        from d5rl.errors import D5RLError
-
         if quality not in QUALITIES:
             raise D5RLError(
                 f"quality must be one of {QUALITIES}, got {quality!r}",

@@ -19,6 +19,8 @@ import functools
 import mujoco
 import numpy as np
 
+from d5rl.envs.kitchen.model import asset_dir
+
 SIZE = 256  # texels per side (the photos are 512-1300 px; software rendering samples 128 px frames)
 # name -> file in kitchen_assets/textures
 PHOTOS = {
@@ -42,8 +44,6 @@ def texture_name(skin: str, flat: bool = False) -> str:
 def photo_image(photo: str, scale: int = 1, size: int = SIZE) -> np.ndarray:
     """uint8 (size, size, 3): the photo resized to ``size / scale`` and tiled ``scale`` x ``scale``."""
     from PIL import Image
-
-    from d5rl.envs.kitchen.model import asset_dir
 
     path = asset_dir() / "kitchen_assets" / "textures" / PHOTOS[photo]
     with Image.open(path) as im:

@@ -19,10 +19,10 @@ import pytest
 import d5rl
 from d5rl.datasets.loading import load_dataset
 from d5rl.envs.a1 import arenas, v1
-from d5rl.envs.a1 import data as a1_data
-from d5rl.envs.a1.agents import AGENTS
-from d5rl.envs.a1.data import replay_env
-from d5rl.envs.a1.policy import SnapshotPolicy, save_actor
+from d5rl.production.a1 import data as a1_data
+from d5rl.production.a1.agents import AGENTS
+from d5rl.production.a1.data import replay_env
+from d5rl.production.a1.policy import SnapshotPolicy, save_actor
 from d5rl.registry import make_env
 
 REPO = Path(__file__).resolve().parents[3]
@@ -99,7 +99,7 @@ def hiking_data(hiking_home, policies, monkeypatch):
 
 def test_generation_runs_the_policies_without_xla():
     """Portable bytes need CPU-independent policy inference: the generator's numpy MLP, never JAX."""
-    code = "import sys, d5rl.envs.a1.data, d5rl.datasets.generation; print(sorted(m for m in sys.modules if m.split('.')[0] in ('jax', 'jaxlib', 'flax')))"
+    code = "import sys, d5rl.production.a1.data, d5rl.datasets.generation; print(sorted(m for m in sys.modules if m.split('.')[0] in ('jax', 'jaxlib', 'flax')))"
     out = subprocess.run([sys.executable, "-c", code], capture_output=True, text=True, cwd=REPO, check=True).stdout
     assert out.strip() == "[]"
 
@@ -107,7 +107,7 @@ def test_generation_runs_the_policies_without_xla():
 def test_v1_datasets_are_portable_and_replay_their_scenes():
     for task in ("a1-walk-v1", "a1-run-v1", "a1-hiking-v1"):
         dspec = d5rl.get_spec(task).dataset
-        assert dspec.numerics == "portable" and dspec.replay == "d5rl.envs.a1.data:replay_env"
+        assert dspec.numerics == "portable" and dspec.replay == "d5rl.production.a1.data:replay_env"
         assert "not published yet" in dspec.unavailable
 
 
@@ -186,7 +186,7 @@ def test_render_episode_replays_on_the_episodes_floor(hiking_data, hiking_home, 
 
 
 def test_v1_datacard_stage_shares_and_speed_histogram(hiking_data):
-    from d5rl.envs.a1.datacard_stats import describe, stage_shares
+    from d5rl.production.a1.datacard_stats import describe, stage_shares
 
     lengths = [len(hiking_data.episode(i).arrays["actions"]) for i in range(hiking_data.num_episodes)]
     by_stage = {}
@@ -241,7 +241,7 @@ def test_calibrate_v1_with_stand_in_agents(policies, tmp_path):
     assert max(lengths) < 400  # random actions in the release's range fall (v0's never did)
     candidates = ("speed-0.5-v1", "speed-0.8-v1", "speed-1.0-v1", "run-1.25-v1")
     assert set(result["per_agent"]) == set(candidates)
-    from d5rl.envs.a1.policy import run_episodes
+    from d5rl.production.a1.policy import run_episodes
 
     for agent in candidates:
         r = run_episodes(env, SnapshotPolicy(policies / agent / "final.npz"), 1, 0)
@@ -305,7 +305,7 @@ def test_trained_and_published_agent_generates_v1_data(policies, tmp_path, monke
         for f in (policies / agent).iterdir():
             (shipped / agent).mkdir(parents=True, exist_ok=True)
             (shipped / agent / f.name).write_bytes(f.read_bytes())
-    trainer = ["-m", "d5rl.envs.a1.experts"]
+    trainer = ["-m", "d5rl.production.a1.experts"]
     env = {
         **os.environ,
         "D5RL_A1_POLICIES": str(shipped),
@@ -360,7 +360,7 @@ def test_calibrate_v1_hiking_picks_among_the_goal_agents_and_the_course_referenc
     result = json.loads(d5rl_cli(policies, tmp_path, "calibrate", "a1-hiking-v1", "--episodes", "1", "--dry-run"))
     assert set(result["per_agent"]) == {"goals-mixed-v1", "goals-smooth-v1", "hiking-v1"}
     env = make_env("a1-hiking-v1")
-    from d5rl.envs.a1.policy import run_episodes
+    from d5rl.production.a1.policy import run_episodes
 
     for agent, ret in result["per_agent"].items():  # 60-D observations: the heading error to the next waypoint
         r = run_episodes(env, SnapshotPolicy(policies / agent / "final.npz"), 1, 0)
@@ -397,7 +397,7 @@ def test_data_from_other_policy_files_is_not_the_published_agents_data(policies,
     d5rl_cli(policies, hiking_home, "verify", "a1-hiking-v1")  # the files it was made from: intact
 
     from d5rl.datasets import generation
-    from d5rl.envs.a1.data import policy_digest
+    from d5rl.production.a1.data import policy_digest
 
     spec = published("a1-hiking-v1", ("goals-mixed-v1",))
     recorded = {

@@ -5,10 +5,11 @@ import pytest
 
 import d5rl
 from d5rl.datasets.generation import episode_rng, make_generator
-from d5rl.envs.a1 import data
-from d5rl.envs.a1.agents import AGENTS, POLICY_DIR
-from d5rl.envs.a1.calibrate import evaluate
-from d5rl.envs.a1.policy import SnapshotPolicy
+from d5rl.envs.a1.published import POLICY_DIR
+from d5rl.production.a1 import data
+from d5rl.production.a1.agents import AGENTS
+from d5rl.production.a1.calibrate import evaluate
+from d5rl.production.a1.policy import SnapshotPolicy
 
 
 def test_data_agents_policies_ship_with_the_package():
@@ -77,7 +78,7 @@ def test_hiking_relabel_matches_heading_agent_reward():
     ],
 )
 def test_shipped_agents_track_their_speed_without_falling(agent, low, high):
-    from d5rl.envs.a1.speedcheck import rollouts
+    from d5rl.production.a1.speedcheck import rollouts
 
     r = rollouts(agent, episodes=2, seed=0, deterministic=True)  # whole episodes from rest, as `check`
     assert not any(r["falls"])
@@ -97,8 +98,8 @@ def test_expert_beats_random_on_walk():
 def test_calibration_records_the_experts_speed(monkeypatch, capsys):
     """calibrate stores each agent's mean forward speed next to its return; `d5rl info` says how fast the expert is."""
     from d5rl.cli import main
-    from d5rl.envs.a1 import calibrate as cal
     from d5rl.envs.a1.registration import _ref
+    from d5rl.production.a1 import calibrate as cal
 
     r = evaluate("a1-walk-v0", SnapshotPolicy(POLICY_DIR / "speed-0.8" / "final.npz"), 1, 0)
     assert len(r["returns"]) == len(r["speeds"]) == 1 and 0.3 < r["speeds"][0] < 1.2  # the 0.8 m/s agent walks
@@ -132,7 +133,7 @@ def test_calibration_records_the_experts_speed(monkeypatch, capsys):
 
 
 def test_speed_histogram_shares_per_column():
-    from d5rl.envs.a1.datacard_stats import speed_histogram
+    from d5rl.production.a1.datacard_stats import speed_histogram
 
     table = speed_histogram({"a": np.array([0.05, 0.05, 0.55, 2.0]), "b": np.array([-1.0])}).splitlines()
     assert table[0] == "| forward speed (m/s) | a | b |"

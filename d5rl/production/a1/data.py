@@ -1,7 +1,7 @@
 """A1 datasets: the data-collecting agents' replay buffers, regenerated from policy snapshots.
 
 The paper's A1 data are the replay buffers of RL agents, "from first exploration to
-expert".  Training those agents (``d5rl.envs.a1.experts``) takes hours, so the
+expert".  Training those agents (``d5rl.production.a1.experts``) takes hours, so the
 repository ships what training produced: for each agent, its actor at every
 snapshot and how many episodes each snapshot collected (``policies/<agent>/log.json``).
 Every training episode is re-collected by the snapshot that was acting then (uniform random actions before
@@ -24,10 +24,11 @@ import numpy as np
 
 from d5rl.datasets.episode import Episode
 from d5rl.envs.a1 import rewards
-from d5rl.envs.a1.agents import AGENTS, EPISODE_STEPS, POLICY_DIR, make_env
-from d5rl.envs.a1.buffers import agent_log, episode_table
-from d5rl.envs.a1.policy import SnapshotPolicy
+from d5rl.envs.a1.published import POLICY_DIR, agent_log
 from d5rl.errors import D5RLError
+from d5rl.production.a1.agents import AGENTS, EPISODE_STEPS, make_env
+from d5rl.production.a1.buffers import episode_table
+from d5rl.production.a1.policy import SnapshotPolicy
 
 INFO_KEYS = ("forward_speed", "standing", "energy", "heading_error")
 
@@ -53,6 +54,7 @@ class ReplayBufferGenerator:
     """Episode ``i`` = training episode ``episode_table(agents)[i]``, re-collected by its snapshot."""
 
     version = "1"
+    name = "d5rl.envs.a1.data:ReplayBufferGenerator"  # in the manifests (the code's first home)
 
     @staticmethod
     def inputs(agents: tuple[str, ...]) -> dict[str, str]:

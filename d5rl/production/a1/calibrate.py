@@ -18,9 +18,11 @@ from pathlib import Path
 
 import numpy as np
 
-from d5rl.envs.a1.agents import POLICY_DIR, describe
-from d5rl.envs.a1.policy import SnapshotPolicy, run_episodes
+from d5rl.envs.a1.published import POLICY_DIR
 from d5rl.envs.a1.registration import SCORE_AGENTS, SCORES_FILE
+from d5rl.errors import D5RLError
+from d5rl.production.a1.agents import describe
+from d5rl.production.a1.policy import SnapshotPolicy, run_episodes
 from d5rl.registry import get_spec, make_env
 
 
@@ -73,8 +75,6 @@ def add_calibrate_parser(subparsers) -> None:
 
     def run(args) -> int:
         if args.episodes < 1:
-            from d5rl.errors import D5RLError
-
             raise D5RLError(f"--episodes must be at least 1, got {args.episodes}", "the references use 20")
         result = calibrate(args.task, args.episodes, args.seed)
         print(json.dumps(result, indent=1))

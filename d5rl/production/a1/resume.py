@@ -15,7 +15,11 @@ from pathlib import Path
 
 import numpy as np
 
-from d5rl.envs.a1.agents import AGENTS, POLICY_DIR, training_reward
+from d5rl.envs.a1.published import POLICY_DIR
+from d5rl.errors import D5RLError
+from d5rl.production.a1.agents import AGENTS, training_reward
+from d5rl.production.a1.policy import SnapshotPolicy
+from d5rl.training.checkpoint import PREVIOUS, Checkpoint, load_checkpoint, save_checkpoint
 
 WORK_DIR = Path("runs") / "a1-experts"  # full checkpoints (with replay buffers): this machine only
 SAVED_DIR = Path("experiments") / "a1-agents"  # committed: policies/, checkpoints/<agents>/, learners/
@@ -33,8 +37,6 @@ def record(buf: dict, i: int, pos: int, obs, action, reward: float, next_obs, te
 def refill_buffer(buf: dict, t: int, segments, names, envs, policy_dir: Path, seed: int) -> None:
     """Fill ``buf[key][i, :t]`` for agent ``names[i]`` by replaying each segment's acting policy
     (its snapshot; uniform actions before learning) for the steps it acted, with the training reward."""
-    from d5rl.envs.a1.policy import SnapshotPolicy
-
     for i, (name, env, segs) in enumerate(zip(names, envs, segments)):
         spec, pos = AGENTS[name], 0
         for j, seg in enumerate(segs):
@@ -56,14 +58,12 @@ def refill_buffer(buf: dict, t: int, segments, names, envs, policy_dir: Path, se
 def publish(agents, trained_dir: Path = SAVED_DIR / "policies", dest: Path = POLICY_DIR) -> None:
     """Ship finished agents: a data agent's snapshots, final policy and log (the dataset generator
     replays them); a reference agent's final policy and log only.  Replaces what ``dest`` held."""
-    from d5rl.errors import D5RLError
-
     for name in agents:
         src = Path(trained_dir) / name
         if not (src / "final.npz").exists():
             raise D5RLError(
                 f"{name} has not finished training ({src / 'final.npz'} is missing)",
-                "train it to its --steps first (python -m d5rl.envs.a1.experts train ...)",
+                "train it to its --steps first (python -m d5rl.production.a1.experts train ...)",
             )
     for name in agents:
         src, out = Path(trained_dir) / name, Path(dest) / name
@@ -78,8 +78,6 @@ def publish(agents, trained_dir: Path = SAVED_DIR / "policies", dest: Path = POL
 def export(work_root: Path = WORK_DIR, saved_root: Path = SAVED_DIR) -> None:
     """Copy each training's latest checkpoint under ``work_root`` without its replay buffer, and the
     finished agents' learners, to ``saved_root``."""
-    from d5rl.training.checkpoint import PREVIOUS, Checkpoint, load_checkpoint, save_checkpoint
-
     work_root, saved_root = Path(work_root), Path(saved_root)
     for run in sorted(p.parent for p in work_root.glob("*/checkpoint")):
         ckpt = load_checkpoint(run)

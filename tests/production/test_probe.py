@@ -3,8 +3,8 @@
 import numpy as np
 import pytest
 
-from d5rl.datasets.probe import NearestNeighbourPolicy
 from d5rl.errors import D5RLError
+from d5rl.production.probe import NearestNeighbourPolicy
 from d5rl.production.toy.data import toy_dataset
 from d5rl.training.evaluation import evaluate
 

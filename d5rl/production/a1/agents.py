@@ -1,20 +1,19 @@
-"""The A1 agents: what each is trained to do and what it is for (light: no JAX, no MuJoCo at import).
+"""The A1 agents: what each is trained to do and what it is for.
 
 Data agents' replay buffers are the A1 datasets; reference agents define score references.
-Training: :mod:`d5rl.envs.a1.experts`; their policies live in ``policies/<agent>/``, or under
-``$D5RL_A1_POLICIES/<agent>/`` when that variable is set (read at import; worker processes inherit it):
-datasets, calibration and checks then use those policies, e.g. trained ones before they are published.
+Training: :mod:`d5rl.production.a1.experts`; their policies: :mod:`d5rl.envs.a1.published`.
 """
 
 from __future__ import annotations
 
 import dataclasses
-import os
 from pathlib import Path
 
 from d5rl.envs.a1 import rewards
+from d5rl.envs.a1.published import POLICY_DIR, agent_log
+from d5rl.envs.a1.task import A1Env
+from d5rl.envs.a1.v1 import A1EnvV1
 
-POLICY_DIR = Path(os.environ.get("D5RL_A1_POLICIES") or Path(__file__).with_name("policies"))
 EPISODE_STEPS = 400
 
 
@@ -69,8 +68,6 @@ AGENTS = {
 
 def describe(agent: str, policy_dir: Path = POLICY_DIR) -> str:
     """How an agent was made, from its spec and its training log: "SAC, 83,750 steps, tracking 0.8 m/s on flat ground"."""
-    from d5rl.envs.a1.buffers import agent_log
-
     spec = AGENTS[agent]
     steps = agent_log(agent, str(policy_dir))["steps"]
     where = (
@@ -89,12 +86,8 @@ def describe(agent: str, policy_dir: Path = POLICY_DIR) -> str:
 
 def make_env(agent: str, **kwargs):
     """The env ``agent`` trains and collects data in (``kwargs``: e.g. ``render_mode``)."""
-    from d5rl.envs.a1.task import A1Env
-
     spec = AGENTS[agent]
     if spec.env_version == 1:
-        from d5rl.envs.a1.v1 import A1EnvV1
-
         extra = {"floors": spec.floors} if spec.task == "run_toward" else {}
         return A1EnvV1(task=spec.task, target_speed=spec.target_speed, **extra, **kwargs)
     return A1Env(target_speed=spec.target_speed, terrain=spec.terrain, command=spec.command, **kwargs)

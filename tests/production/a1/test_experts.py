@@ -6,7 +6,7 @@ import numpy as np
 import pytest
 
 from d5rl.envs.a1 import rewards
-from d5rl.envs.a1.agents import AGENTS, AgentSpec, make_env, training_reward
+from d5rl.production.a1.agents import AGENTS, AgentSpec, make_env, training_reward
 
 pytest.importorskip("jax")
 
@@ -37,7 +37,7 @@ def test_narrow_band_rewards_the_target_not_the_slow_edge():
 
 
 def _train(tmp_path, name, max_minutes=None):
-    from d5rl.envs.a1.experts import Trainer
+    from d5rl.production.a1.experts import Trainer
 
     t = Trainer(
         ["speed-0.5", "run-1.25"],
@@ -81,7 +81,7 @@ def test_trainer_writes_snapshots_logs_and_resumes_bit_for_bit(tmp_path):
 
 
 def test_snapshot_boundaries_double_from_the_first_segment():
-    from d5rl.envs.a1.experts import boundaries
+    from d5rl.production.a1.experts import boundaries
 
     assert sorted(boundaries(5000, 1250, 20000, 80000)) == [5000, 6250, 8750, 13750, 23750, 43750, 63750]
     # uniform segments when the first is as long as the rest (the default)
@@ -89,7 +89,7 @@ def test_snapshot_boundaries_double_from_the_first_segment():
 
 
 def test_trainer_snapshots_on_the_doubling_schedule(tmp_path):
-    from d5rl.envs.a1.experts import Trainer
+    from d5rl.production.a1.experts import Trainer
 
     policies = tmp_path / "policies"
     Trainer(
@@ -110,7 +110,7 @@ def test_trainer_snapshots_on_the_doubling_schedule(tmp_path):
 
 
 def test_trainer_refuses_mixed_observation_sizes(tmp_path):
-    from d5rl.envs.a1.experts import Trainer
+    from d5rl.production.a1.experts import Trainer
 
     with pytest.raises(ValueError, match="observation sizes"):
         Trainer(["speed-0.5", "heading"], 10, 0, 5, 5, 1, tmp_path)
@@ -120,8 +120,8 @@ def test_trainer_refuses_mixed_observation_sizes(tmp_path):
 def test_v1_agents_train_resume_from_an_export_and_check(tmp_path, capsys):
     """The v1 agents (the release's tasks) go through the same trainer: snapshots, export without buffers,
     resume elsewhere with the buffer refilled on the v1 envs, a reference trained from a data agent, check."""
-    from d5rl.envs.a1.experts import Trainer, main
-    from d5rl.envs.a1.resume import export
+    from d5rl.production.a1.experts import Trainer, main
+    from d5rl.production.a1.resume import export
 
     policies, saved = tmp_path / "policies", tmp_path / "saved"
 

@@ -1,6 +1,6 @@
 """The speed bar of the A1 agents: how fast each final policy really moves, and whether it falls.
 
-    python -m d5rl.envs.a1.experts check [--agents speed-0.5 ...] [--episodes 10]
+    python -m d5rl.production.a1.experts check [--agents speed-0.5 ...] [--episodes 10]
 
 For every agent, its final policy (``policies/<agent>/final.npz``) runs full episodes on the
 environment it was trained on, with deterministic actions and with the policy's own sampling
@@ -15,17 +15,16 @@ from pathlib import Path
 
 import numpy as np
 
-from d5rl.envs.a1.agents import POLICY_DIR
+from d5rl.envs.a1.published import POLICY_DIR
+from d5rl.production.a1.agents import AGENTS, make_env
+from d5rl.production.a1.policy import SnapshotPolicy, run_episodes
 
 BAR = 0.05  # relative speed error allowed
 
 
 def rollouts(agent: str, episodes: int, seed: int, deterministic: bool, policy_dir: Path = POLICY_DIR) -> dict:
     """Per-episode mean forward speed, length and whether it fell, for an agent's final policy on the env
-    it was trained on (:func:`d5rl.envs.a1.policy.run_episodes`)."""
-    from d5rl.envs.a1.agents import AGENTS, make_env
-    from d5rl.envs.a1.policy import SnapshotPolicy, run_episodes
-
+    it was trained on (:func:`d5rl.production.a1.policy.run_episodes`)."""
     env = make_env(agent)
     try:
         return run_episodes(
@@ -41,8 +40,6 @@ def rollouts(agent: str, episodes: int, seed: int, deterministic: bool, policy_d
 
 
 def check(agent: str, episodes: int = 10, seed: int = 0, policy_dir: Path = POLICY_DIR) -> list[dict]:
-    from d5rl.envs.a1.agents import AGENTS
-
     target = AGENTS[agent].target_speed
     rows = []
     for mode in ("deterministic", "stochastic"):

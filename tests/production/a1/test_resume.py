@@ -9,8 +9,8 @@ pytest.importorskip("jax")
 
 
 def test_exported_checkpoint_resumes_on_a_machine_without_the_buffer(tmp_path):
-    from d5rl.envs.a1.experts import Trainer
-    from d5rl.envs.a1.resume import export
+    from d5rl.production.a1.experts import Trainer
+    from d5rl.production.a1.resume import export
     from d5rl.training.checkpoint import load_checkpoint
 
     def trainer(work):
@@ -58,7 +58,7 @@ def test_exported_checkpoint_resumes_on_a_machine_without_the_buffer(tmp_path):
 
 
 def test_training_time_of_a_checkpoint_from_before_it_was_stored_comes_from_the_logs(tmp_path):
-    from d5rl.envs.a1.experts import Trainer
+    from d5rl.production.a1.experts import Trainer
     from d5rl.training.checkpoint import Checkpoint, load_checkpoint, save_checkpoint
 
     def trainer():
@@ -84,9 +84,9 @@ def test_training_time_of_a_checkpoint_from_before_it_was_stored_comes_from_the_
 
 
 def test_publish_ships_a_data_agents_snapshots_and_a_reference_agents_final_policy(tmp_path):
-    from d5rl.envs.a1.experts import Trainer
-    from d5rl.envs.a1.resume import publish
     from d5rl.errors import D5RLError
+    from d5rl.production.a1.experts import Trainer
+    from d5rl.production.a1.resume import publish
 
     trained, shipped = tmp_path / "policies", tmp_path / "shipped"
     t = Trainer(

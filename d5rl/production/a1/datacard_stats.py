@@ -1,7 +1,7 @@
 """Statistics of the generated A1 datasets for docs/datacards/a1.md.
 
-    python -m d5rl.envs.a1.datacard_stats              # the v0 datasets (d5rl generate first)
-    python -m d5rl.envs.a1.datacard_stats --version 1  # the v1 datasets
+    python -m d5rl.production.a1.datacard_stats              # the v0 datasets (d5rl generate first)
+    python -m d5rl.production.a1.datacard_stats --version 1  # the v1 datasets
 
 Prints Markdown: size, per-agent composition (and how fast each agent's last snapshot walks in
 the data), each agent's share of transitions per training stage (the snapshot that collected them),

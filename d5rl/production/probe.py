@@ -6,7 +6,7 @@ parameters and no training budget, so its score separates two questions a low ag
 leaves open: is the data hard to imitate from these observations (then this probe fails too),
 or do the agents not fit it (then the probe scores well and they do not)?
 
-    python -m d5rl.datasets.probe kitchen-standard-mixed-state-v0 --episodes 20 --k 5
+    python -m d5rl.production.probe kitchen-standard-mixed-state-v0 --episodes 20 --k 5
 
 State observations only (a pixel task's images are not a useful metric space for this).
 Needs scipy (installed with the ``train`` extra, through jax).
@@ -18,7 +18,9 @@ import argparse
 
 import numpy as np
 
+from d5rl.datasets.loading import load_dataset
 from d5rl.errors import D5RLError
+from d5rl.training.evaluation import evaluate
 
 
 class NearestNeighbourPolicy:
@@ -57,16 +59,13 @@ class NearestNeighbourPolicy:
 
 def probe(task_id: str, episodes: int = 20, k: int = 5, seed: int = 0, num_envs: int = 5) -> dict:
     """Evaluate the nearest-neighbour policy of ``task_id``'s dataset; :func:`evaluate`'s result."""
-    import d5rl
-    from d5rl.training.evaluation import evaluate
-
-    ds = d5rl.load_dataset(task_id)
+    ds = load_dataset(task_id)
     policy = NearestNeighbourPolicy(ds.observations, ds.arrays["actions"], k)
     return evaluate(policy, task_id, episodes, seed, num_envs=num_envs)
 
 
 def main(argv=None) -> None:
-    p = argparse.ArgumentParser(prog="python -m d5rl.datasets.probe", description=__doc__.split("\n\n")[0])
+    p = argparse.ArgumentParser(prog="python -m d5rl.production.probe", description=__doc__.split("\n\n")[0])
     p.add_argument("task", help="a state task (kitchen and WidowX: their -state twins)")
     p.add_argument("--episodes", type=int, default=20)
     p.add_argument("--k", type=int, default=5, help="neighbours averaged per action")

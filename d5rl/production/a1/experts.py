@@ -1,22 +1,22 @@
 """Train the A1 agents: the data-collecting agents and the score-reference experts.
 
-    python -m d5rl.envs.a1.experts train --agents speed-0.5 speed-1.0 --steps 203750 --snapshot-every 20000 \
+    python -m d5rl.production.a1.experts train --agents speed-0.5 speed-1.0 --steps 203750 --snapshot-every 20000 \
         --first-segment 1250
-    python -m d5rl.envs.a1.experts train --agents heading --steps 145000 --snapshot-every 20000
-    python -m d5rl.envs.a1.experts train --agents hiking --init-from heading --steps 65000 --snapshot-every 20000
-    python -m d5rl.envs.a1.experts check --policy-dir experiments/a1-agents/policies   # the speed bar
-    python -m d5rl.envs.a1.experts publish               # ship them to d5rl/envs/a1/policies
-    python -m d5rl.envs.a1.experts export                # between machines (see below)
+    python -m d5rl.production.a1.experts train --agents heading --steps 145000 --snapshot-every 20000
+    python -m d5rl.production.a1.experts train --agents hiking --init-from heading --steps 65000 --snapshot-every 20000
+    python -m d5rl.production.a1.experts check --policy-dir experiments/a1-agents/policies   # the speed bar
+    python -m d5rl.production.a1.experts publish               # ship them to d5rl/envs/a1/policies
+    python -m d5rl.production.a1.experts export                # between machines (see below)
 
 The agents of the ``a1-*-v1`` tasks (:mod:`d5rl.envs.a1.v1`, the release's action range and reward) end
 in ``-v1`` and train the same way::
 
-    python -m d5rl.envs.a1.experts train --agents speed-0.5-v1 speed-0.8-v1 speed-1.0-v1 --steps 300000 \
+    python -m d5rl.production.a1.experts train --agents speed-0.5-v1 speed-0.8-v1 speed-1.0-v1 --steps 300000 \
         --snapshot-every 20000 --first-segment 1250 --single-thread
-    python -m d5rl.envs.a1.experts train --agents goals-mixed-v1 goals-smooth-v1 --steps 300000 \
+    python -m d5rl.production.a1.experts train --agents goals-mixed-v1 goals-smooth-v1 --steps 300000 \
         --snapshot-every 20000 --first-segment 1250 --single-thread
-    python -m d5rl.envs.a1.experts train --agents run-1.25-v1 --steps 300000 --snapshot-every 20000 --single-thread
-    python -m d5rl.envs.a1.experts train --agents hiking-v1 --init-from goals-mixed-v1 --steps 100000 \
+    python -m d5rl.production.a1.experts train --agents run-1.25-v1 --steps 300000 --snapshot-every 20000 --single-thread
+    python -m d5rl.production.a1.experts train --agents hiking-v1 --init-from goals-mixed-v1 --steps 100000 \
         --snapshot-every 20000 --single-thread
 
 (the commands as run, one process per core: ``docs/datacards/a1.md``).
@@ -42,7 +42,7 @@ from it; ``--max-minutes`` stops at the first boundary after the budget.
 
 **Across machines** (training can outlast a machine you hold for a few hours): ``export``
 writes the checkpoints without their replay buffers to ``experiments/a1-agents`` for committing,
-and ``train`` resumes from there when ``--work-dir`` has none (:mod:`d5rl.envs.a1.resume`).
+and ``train`` resumes from there when ``--work-dir`` has none (:mod:`d5rl.production.a1.resume`).
 
 **Training reward.** The tasks' rewards are flat within ±0.1 m/s of the target, and their energy
 term then pulls an agent to the slow edge (agents trained on the task reward settle at 0.48 / 0.71 /
@@ -61,8 +61,13 @@ from pathlib import Path
 
 import numpy as np
 
-from d5rl.envs.a1.agents import AGENTS, POLICY_DIR, make_env, training_reward
-from d5rl.envs.a1.resume import SAVED_DIR, WORK_DIR, export, publish, record, refill_buffer
+from d5rl.envs.a1.published import POLICY_DIR
+from d5rl.parallel import configure_worker
+from d5rl.production.a1.agents import AGENTS, make_env, training_reward
+from d5rl.production.a1.policy import save_actor
+from d5rl.production.a1.resume import SAVED_DIR, WORK_DIR, export, publish, record, refill_buffer
+from d5rl.production.a1.speedcheck import main as check
+from d5rl.training.checkpoint import Checkpoint, load_checkpoint, save_checkpoint
 
 
 def boundaries(start_steps: int, first_segment: int, snapshot_every: int, steps: int) -> frozenset[int]:
@@ -77,7 +82,7 @@ def boundaries(start_steps: int, first_segment: int, snapshot_every: int, steps:
 
 
 def learner_config(utd: int):
-    from d5rl.agents import rlpd
+    from d5rl.agents import rlpd  # optional dependency: JAX (the `train` extra); publish/export/check run without
 
     return rlpd.get_config().replace(num_qs=2, num_min_qs=2, utd_ratio=utd, batch_size=256, hidden_dims=(256, 256))
 
@@ -152,10 +157,10 @@ class Trainer:
 
     # --- learners -----------------------------------------------------------------------------------
     def _new_learners(self):
-        import jax
+        import jax  # optional dependency (the `train` extra), as every JAX import here
         import jax.numpy as jnp
 
-        from d5rl.agents.rlpd import RLPDAgent
+        from d5rl.agents.rlpd import RLPDAgent  # optional dependency: JAX
 
         obs = np.zeros((1, self.obs_dim), np.float32)
         learners = [
@@ -200,8 +205,6 @@ class Trainer:
     def _save(self, learners, t: int, rng, key, segments, seconds: float) -> None:
         import flax
 
-        from d5rl.training.checkpoint import Checkpoint, save_checkpoint
-
         state = {
             "agents": self.names,
             "t": t,
@@ -222,8 +225,6 @@ class Trainer:
 
     def _load(self, learners):
         import flax
-
-        from d5rl.training.checkpoint import load_checkpoint
 
         ckpt = load_checkpoint(self.work_dir)
         if ckpt is None and self.saved_root is not None:
@@ -293,7 +294,6 @@ class Trainer:
             (out / "log.json").write_text(json.dumps(log, indent=1, default=str) + "\n")
 
     def _snapshot(self, learners, i: int, filename: str) -> None:
-        from d5rl.envs.a1.policy import save_actor
 
         save_actor(self._unstacked(learners, i).actor.params, self.policy_dir / self.names[i] / filename)
 
@@ -476,8 +476,6 @@ def main(argv=None) -> None:
     args = ap.parse_args(argv)
     if args.cmd == "train":
         if args.single_thread:
-            from d5rl.parallel import configure_worker
-
             configure_worker(single_thread=True)
         work = args.work_dir or WORK_DIR / "+".join(args.agents)
         Trainer(
@@ -500,8 +498,6 @@ def main(argv=None) -> None:
             args.agents or [a for a in sorted(AGENTS) if (args.policy_dir / a / "final.npz").exists()], args.policy_dir
         )
     else:
-        from d5rl.envs.a1.speedcheck import main as check
-
         agents = args.agents or [a for a in sorted(AGENTS) if (args.policy_dir / a / "final.npz").exists()]
         check(agents, args.episodes, args.seed, args.policy_dir)
 
