@@ -107,16 +107,16 @@ def load_dataset(
             return _open(
                 spec,
                 dspec,
-                seed,
-                root,
-                wanted,
-                episodes is not None,
-                in_memory,
-                limit,
-                obs_keys,
-                workers,
-                progress,
-                derived_kwargs,
+                seed=seed,
+                root=root,
+                wanted=wanted,
+                partial=episodes is not None,
+                in_memory=in_memory,
+                limit=limit,
+                obs_keys=obs_keys,
+                workers=workers,
+                progress=progress,
+                derived_kwargs=derived_kwargs,
             )
         except _NotReady as e:
             if not generate or attempt == 2 or dspec.imported:
@@ -182,7 +182,23 @@ def _manifest(path: Path, spec: TaskSpec, dspec) -> dict:
         raise _NotReady(DatasetCorruptError(e.message, _repair_hint(spec, dspec)), True) from None
 
 
-def _open(spec, dspec, seed, root, wanted, partial, in_memory, limit, obs_keys, workers, progress, derived_kwargs):
+def _open(
+    spec: TaskSpec,
+    dspec,
+    *,
+    seed: int,
+    root: Path,
+    wanted: int,
+    partial: bool,
+    in_memory: bool | str,
+    limit: int,
+    obs_keys: list[str] | None,
+    workers: int | None,
+    progress: bool,
+    derived_kwargs: dict,
+) -> Dataset:
+    """The first ``wanted`` episodes of the dataset at ``root`` (``partial``: fewer than all were asked for),
+    derived caches built first; :class:`_NotReady` when it must be generated or repaired first."""
     manifest_path = root / fmt.MANIFEST
     have = _manifest(manifest_path, spec, dspec)["num_episodes"] if manifest_path.exists() else 0
     if have < wanted and dspec.imported:

@@ -2,7 +2,6 @@
 
 from __future__ import annotations
 
-import dataclasses
 import json
 from pathlib import Path
 
@@ -42,7 +41,7 @@ SCORE_AGENTS = {
 
 LOCOMOTION_DATA = DatasetSpec(
     name="a1-locomotion",
-    version=1,  # 1: the retrained agents (83,750 steps each, speed-band reward; was 30,000 steps)
+    version=1,  # each version's agents: CHANGELOG.md
     generator="d5rl.production.a1.data:ReplayBufferGenerator",
     num_episodes=buffer_episodes(SPEED_AGENTS),
     episodes_per_shard=8,
@@ -53,7 +52,7 @@ LOCOMOTION_DATA = DatasetSpec(
 )
 HIKING_DATA = DatasetSpec(
     name="a1-hiking",
-    version=1,  # 1: the retrained heading agent (145,000 steps on the doubling segment schedule; was 30,000)
+    version=1,  # each version's agent: CHANGELOG.md
     generator="d5rl.production.a1.data:ReplayBufferGenerator",
     num_episodes=buffer_episodes(HIKING_AGENTS),
     episodes_per_shard=8,
@@ -118,43 +117,43 @@ def _unavailable(agents: tuple[str, ...]) -> str | None:
 
 # each episode's scene (floor, friction, mass, goals) is drawn at reset: replays rebuild it from the stored seed
 REPLAY_V1 = "d5rl.production.a1.data:replay_env"
-LOCOMOTION_DATA_V1 = DatasetSpec(
-    name="a1-v1-locomotion",
-    version=1,
-    generator="d5rl.production.a1.data:ReplayBufferGenerator",
-    num_episodes=buffer_episodes(SPEED_AGENTS_V1),
-    episodes_per_shard=8,
-    generator_kwargs={"agents": SPEED_AGENTS_V1},
-    description="replay buffers of three SAC agents trained on the release's run task to track 0.5, 0.8 "
+
+
+def _v1_data(name: str, agents: tuple[str, ...], description: str) -> DatasetSpec:
+    """A v1 dataset: the replay buffers of ``agents``, available once they are published."""
+    return DatasetSpec(
+        name=name,
+        version=1,
+        generator="d5rl.production.a1.data:ReplayBufferGenerator",
+        num_episodes=buffer_episodes(agents),
+        episodes_per_shard=8,
+        generator_kwargs={"agents": agents},
+        description=description,
+        unavailable=_unavailable(agents),
+        numerics="portable",
+        replay=REPLAY_V1,
+    )
+
+
+LOCOMOTION_DATA_V1 = _v1_data(
+    "a1-v1-locomotion",
+    SPEED_AGENTS_V1,
+    "replay buffers of three SAC agents trained on the release's run task to track 0.5, 0.8 "
     "and 1.0 m/s, first exploration to expert, replayed from committed policy snapshots",
-    unavailable=_unavailable(SPEED_AGENTS_V1),
-    numerics="portable",
-    replay=REPLAY_V1,
 )
-HIKING_DATA_V1 = DatasetSpec(
-    name="a1-v1-hiking",
-    version=1,
-    generator="d5rl.production.a1.data:ReplayBufferGenerator",
-    num_episodes=buffer_episodes(HIKING_AGENTS_V1),
-    episodes_per_shard=8,
-    generator_kwargs={"agents": HIKING_AGENTS_V1},
-    description="replay buffer of a SAC agent running toward random goals (the release's RunToward: "
-    "smooth and bumpy floors)",
-    unavailable=_unavailable(HIKING_AGENTS_V1),
-    numerics="portable",
-    replay=REPLAY_V1,
+HIKING_DATA_V1 = _v1_data(
+    "a1-v1-hiking",
+    HIKING_AGENTS_V1,
+    "replay buffer of a SAC agent running toward random goals (the release's RunToward: smooth and bumpy floors)",
 )
 # The other hiking data candidate, on the plane only (the paper: the hiking data show "flat terrain"); BC on
 # the course on each decides which agent's buffer is a1-v1-hiking (docs/datacards/a1.md, v1).
 HIKING_SMOOTH_AGENTS_V1 = ("goals-smooth-v1",)
-HIKING_SMOOTH_DATA_V1 = dataclasses.replace(
-    HIKING_DATA_V1,
-    name="a1-v1-hiking-smooth",
-    num_episodes=buffer_episodes(HIKING_SMOOTH_AGENTS_V1),
-    generator_kwargs={"agents": HIKING_SMOOTH_AGENTS_V1},
-    description="replay buffer of a SAC agent running toward random goals on the plane (the release's "
-    "RunToward, smooth floor only)",
-    unavailable=_unavailable(HIKING_SMOOTH_AGENTS_V1),
+HIKING_SMOOTH_DATA_V1 = _v1_data(
+    "a1-v1-hiking-smooth",
+    HIKING_SMOOTH_AGENTS_V1,
+    "replay buffer of a SAC agent running toward random goals on the plane (the release's RunToward, smooth "
+    "floor only)",
 )
 for task_id, speed in (("a1-walk-v1", 0.75), ("a1-run-v1", 1.25)):
     register(

@@ -27,6 +27,94 @@ def _wrap(a):
     return (a + np.pi) % (2 * np.pi) - np.pi
 
 
+class Command:
+    """What a v0 task asks the robot to follow (dm_control style: the env composes one per task).  The
+    base runs along +x and is paid by :func:`rewards.speed_reward`; the env calls ``reset`` after placing
+    the robot and ``after_step`` after each control step."""
+
+    directed = False  # the observation carries sin / cos of the heading error
+    energy_coef = rewards.ENERGY_COEF
+
+    def reset(self, env: A1Env, rng: np.random.Generator) -> None:
+        pass
+
+    def after_step(self, env: A1Env, rng: np.random.Generator) -> None:
+        pass
+
+    def desired_heading(self, env: A1Env) -> float:
+        return 0.0
+
+    def reward(self, env: A1Env, forward: float, standing: float, energy: float, heading_error: float) -> float:
+        return rewards.speed_reward(forward, standing, energy, env.target_speed, self.energy_coef)
+
+    def waypoints_reached(self) -> int:
+        return 0
+
+    def stats(self) -> dict:
+        return {}
+
+
+class Forward(Command):
+    """Track the target speed along +x on flat ground (a1-walk-v0, a1-run-v0)."""
+
+
+class Directed(Command):
+    """A task with a direction to follow: the observation carries the heading error, and the reward
+    :func:`rewards.hiking_reward` weighs the speed by it."""
+
+    directed = True
+    energy_coef = rewards.HIKING_ENERGY_COEF
+
+    def reward(self, env, forward, standing, energy, heading_error):
+        return rewards.hiking_reward(forward, standing, energy, heading_error, env.target_speed, self.energy_coef)
+
+
+class Heading(Directed):
+    """Follow a heading drawn at reset that turns by U(±π/2) every ``change_steps`` steps (the hiking
+    data agent's task)."""
+
+    def __init__(self, change_steps: int = 100):
+        self.change_steps = int(change_steps)
+        self.heading = 0.0
+
+    def reset(self, env, rng):
+        self.heading = rng.uniform(-np.pi, np.pi)
+
+    def after_step(self, env, rng):
+        if env.steps % self.change_steps == 0:
+            self.heading = float(_wrap(self.heading + rng.uniform(-np.pi / 2, np.pi / 2)))
+
+    def desired_heading(self, env):
+        return self.heading
+
+
+class Waypoints(Directed):
+    """Walk the course through its waypoints (a1-hiking-v0): head for the next one's x on the line y = 0."""
+
+    def __init__(self, course: Course):
+        self.course = course
+        self.reached = 0
+
+    def reset(self, env, rng):
+        self.reached = 0
+
+    def after_step(self, env, rng):
+        waypoints = self.course.waypoints
+        while self.reached < len(waypoints) and env.data.qpos[0] >= waypoints[self.reached] - WAYPOINT_TOLERANCE:
+            self.reached += 1
+
+    def desired_heading(self, env):
+        wx = self.course.waypoints[min(self.reached, len(self.course.waypoints) - 1)]
+        x, y = env.data.qpos[0], env.data.qpos[1]
+        return float(np.arctan2(-y, wx - x))
+
+    def waypoints_reached(self) -> int:
+        return self.reached
+
+    def stats(self):
+        return {"waypoints_reached": float(self.reached)}
+
+
 class A1Env(A1State, MujocoEnv):
     """Unitree A1 quadruped tracking a forward speed, on flat ground or on a hiking course.
 
@@ -93,33 +181,24 @@ class A1Env(A1State, MujocoEnv):
             height=height,
         )
         self.target_speed = float(target_speed)
-        self.command = command
-        self.heading_change_steps = int(heading_change_steps)
-        self.energy_coef = rewards.ENERGY_COEF if command == "forward" else rewards.HIKING_ENERGY_COEF
+        self.task = {
+            "forward": Forward,
+            "heading": lambda: Heading(heading_change_steps),
+            "waypoints": lambda: Waypoints(self.course),
+        }[command]()
         self.idx = Indices.of(self.model)
         self.trunk_id = self.model.body("trunk").id
         self._home = self.model.key("home").id  # an id, not a keyframe view: the env pickles and deep-copies
-        obs_dim = 58 + (2 if command != "forward" else 0)
+        obs_dim = 58 + (2 if self.task.directed else 0)
         self.observation_space = gym.spaces.Box(-np.inf, np.inf, (obs_dim,), np.float32)
         self.action_space = gym.spaces.Box(-1.0, 1.0, (12,), np.float32)
         self._prev_action = np.zeros(12)
-        self._heading = 0.0
-        self._waypoint = 0
-        self._t = 0
+        self.steps = 0  # control steps since reset
 
     # --- task -------------------------------------------------------------------------------------
-    def _desired_heading(self) -> float:
-        if self.command == "forward":
-            return 0.0
-        if self.command == "heading":
-            return self._heading
-        wx = self.course.waypoints[min(self._waypoint, len(self.course.waypoints) - 1)]
-        x, y = self.data.qpos[0], self.data.qpos[1]
-        return float(np.arctan2(-y, wx - x))
-
     def _heading_error(self) -> float:
         _, _, yaw = _euler_from_quat(self.body_quat())
-        return float(_wrap(self._desired_heading() - yaw))
+        return float(_wrap(self.task.desired_heading(self) - yaw))
 
     def _obs(self) -> np.ndarray:
         parts = [
@@ -131,7 +210,7 @@ class A1Env(A1State, MujocoEnv):
             self.body_quat(),
             self._prev_action,
         ]
-        if self.command != "forward":
+        if self.task.directed:
             err = self._heading_error()
             parts.append([np.sin(err), np.cos(err)])
         return np.concatenate(parts).astype(np.float32)
@@ -148,9 +227,8 @@ class A1Env(A1State, MujocoEnv):
         self.data.qpos[3:7] = [np.cos(yaw / 2), 0.0, 0.0, np.sin(yaw / 2)]
         self.data.ctrl[:] = NOMINAL_POSE
         self._prev_action = np.zeros(12)
-        self._heading = rng.uniform(-np.pi, np.pi) if self.command == "heading" else 0.0
-        self._waypoint = 0
-        self._t = 0
+        self.task.reset(self, rng)
+        self.steps = 0
         self._speed_sum = 0.0
         mujoco.mj_forward(self.model, self.data)
         return self._obs(), {}
@@ -162,10 +240,7 @@ class A1Env(A1State, MujocoEnv):
         standing = float(rewards.standing_term(self.upright(), self.joint_pos()))
         energy = float(np.abs(self.joint_vel() * self.torques()).sum())
         heading_error = self._heading_error()
-        if self.command == "forward":
-            reward = rewards.speed_reward(forward, standing, energy, self.target_speed, self.energy_coef)
-        else:
-            reward = rewards.hiking_reward(forward, standing, energy, heading_error, self.target_speed)
+        reward = self.task.reward(self, forward, standing, energy, heading_error)
         return float(reward), {
             "forward_speed": forward,
             "standing": standing,
@@ -177,15 +252,8 @@ class A1Env(A1State, MujocoEnv):
         action = self.check_action(action)
         self.do_simulation(NOMINAL_POSE + ACTION_SCALE * action)
         self._prev_action = action
-        self._t += 1
-        if self.command == "heading" and self._t % self.heading_change_steps == 0:
-            self._heading = float(_wrap(self._heading + self.np_random.uniform(-np.pi / 2, np.pi / 2)))
-        if self.command == "waypoints":
-            while (
-                self._waypoint < len(self.course.waypoints)
-                and self.data.qpos[0] >= self.course.waypoints[self._waypoint] - WAYPOINT_TOLERANCE
-            ):
-                self._waypoint += 1
+        self.steps += 1
+        self.task.after_step(self, self.np_random)
 
         reward, terms = self.reward_terms()
         roll, pitch, _ = _euler_from_quat(self.body_quat())
@@ -193,8 +261,11 @@ class A1Env(A1State, MujocoEnv):
         if self.course is not None and abs(self.data.qpos[1]) > MAX_LATERAL_OFFSET:
             terminated = True
         self._speed_sum += terms["forward_speed"]
-        stats = {"forward_speed": self._speed_sum / self._t, "ended_early": float(terminated)}
-        if self.command == "waypoints":
-            stats["waypoints_reached"] = float(self._waypoint)
-        info = {**terms, "x": float(self.data.qpos[0]), "waypoints_reached": self._waypoint, "episode_stats": stats}
+        stats = {"forward_speed": self._speed_sum / self.steps, "ended_early": float(terminated), **self.task.stats()}
+        info = {
+            **terms,
+            "x": float(self.data.qpos[0]),
+            "waypoints_reached": self.task.waypoints_reached(),
+            "episode_stats": stats,
+        }
         return self._obs(), float(reward), terminated, False, info

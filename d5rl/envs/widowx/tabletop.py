@@ -131,8 +131,8 @@ def add_tabletop(spec: mujoco.MjSpec) -> None:
     """Room, table, bins, lights and the side camera (the robot's base stands on the table at the origin)."""
     _add_textures(spec)
     wb = spec.worldbody
-    # The room holds what falls off the table: floor, walls and legs collide (dataset v3; before, they were
-    # visual only and a toy thrown off the table fell forever).
+    # The room holds what falls off the table: floor, walls and legs collide, so a toy thrown off the table
+    # lands on the floor.
     floor_z = -TABLE_HEIGHT
     wb.add_geom(name="floor", type=mujoco.mjtGeom.mjGEOM_PLANE, size=[3, 3, 0.1], pos=[0, 0, floor_z], material="floor")
     mid_z = floor_z + WALL_HEIGHT / 2

@@ -99,10 +99,7 @@ def habit_schedule(habit: float, n: int) -> tuple[int, ...]:
 class KitchenStandardGenerator:
     """Episode generator (see the module docstring)."""
 
-    # 2: integral action, wrist homing; 3: unwind before microwave/kettle; 4: straight reaches;
-    # 5: joint-space transits to inverse-kinematics solutions between subtasks
-    # 6: no detours via random points and no pauses (Style.sample): a unimodal BC could not follow them
-    version = "kitchen-standard-demos-6"
+    version = "kitchen-standard-demos-6"  # what each version changed: CHANGELOG.md
     name = "d5rl.envs.kitchen.data:KitchenStandardGenerator"  # in the manifests (the code's first home)
 
     def __init__(self, task_id: str | None = None, max_steps: int = MAX_STEPS, habit: float | None = None):

@@ -26,15 +26,13 @@ from d5rl.envs.kitchen.subtasks import SUBTASK_NAMES
 # --- the policy -----------------------------------------------------------------------------------
 # Between subtasks the arm moves in joint space, straight to an inverse-kinematics solution of the
 # next subtask's first target found from the rest posture (so the wrist arrives unwound, with the
-# roll that leaves the last joint room).  The task-space resolved-rate moves these replace ran one
-# joint into its velocity limit while the others idled (a joint saturated in 96% of those steps, the
-# hand at 0.34 m/s against a 0.8 m/s command) and carried a wound-round wrist from one subtask to
-# the next, leaving handles out of reach.  Measured on the 22 combinations (4, 8 and 6 seeds each):
-# four-subtask success 67% / 65% -> 85% / 83% / 82%.
+# roll that leaves the last joint room): task-space moves over such distances run one joint into its
+# velocity limit while the others idle, and carry a wound-round wrist from one subtask to the next, leaving
+# handles out of reach (the measured effect: CHANGELOG.md, generator kitchen-standard-demos-5).
 # A joint-space transit is used when the next target is more than TRANSIT_DISTANCE away, always
-# before the hinge cabinet (after a knob the hinge's pre-grasp stalled with joint 6 at its limit),
+# before the hinge cabinet (after a knob the hinge's pre-grasp stalls with joint 6 at its limit),
 # and before the microwave or the kettle when a wrist joint is more than WOUND (rad) from the rest
-# posture (after the slide cabinet or the light switch their handles were out of reach).
+# posture (after the slide cabinet or the light switch their handles are out of reach).
 TRANSIT_DISTANCE = 0.4
 TRANSIT_ALWAYS = ("hinge cabinet",)
 TRANSIT_IF_WOUND = ("microwave", "kettle")

@@ -51,10 +51,7 @@ PICKPLACE_STEPS = 60
 class WidowXScriptedGenerator:
     """Episode generator for both WidowX datasets (see the module docstring)."""
 
-    # 2: objects dropped in random orientations and settled; grasps across the narrow side seen from above.
-    # 3: tabletop room scene and its variation; objects scaled to be graspable on any side; sorting plans.
-    # 4: the room's floor, walls and table legs collide (an object off the table lands on the floor).
-    version = "wx-scripted-4"
+    version = "wx-scripted-4"  # what each version changed: CHANGELOG.md
     name = "d5rl.envs.widowx.data:WidowXScriptedGenerator"  # in the manifests (the code's first home)
 
     def __init__(

@@ -9,9 +9,7 @@ MAX_EPISODE_STEPS = 500  # control steps of 0.08 s (the paper's randomized kitch
 def _dataset(mode: str, n: int, desc: str) -> DatasetSpec:
     return DatasetSpec(
         name=f"kitchen-randomized-{mode}",
-        version=3,  # 1: object models with their own physics, two kettle sites, wider ranges, photo textures
-        # 2: generator 8 (unskilled operators give up half as often; demos bytes unchanged)
-        # 3: generator 9 (transits re-solve a missed inverse kinematics: far kettles reached)
+        version=3,  # what each version changed: CHANGELOG.md
         generator="d5rl.production.kitchen.randomized.data:RandomizedKitchenGenerator",
         num_episodes=n,
         episodes_per_shard=16,

@@ -79,17 +79,7 @@ def play_subtasks(rng: np.random.Generator) -> list[str]:
 class RandomizedKitchenGenerator:
     """Episode generator; ``mode`` is ``demos``, ``play`` or ``suboptimal``."""
 
-    # 2: microwave pose noise; 3: integral action, wrist homing; 4: unwind; 5: straight reaches;
-    # 6: joint-space transits, surface textures, microwave handles per model, wider microwave and kettle
-    #    poses, kettle yaw (the domain draws more numbers, so every episode changes)
-    # 7: kettle and microwave models with their own collision geometry, mass and handle (grasp plan per
-    #    model), two kettle sites, wider microwave and kettle ranges, photographic textures, cabinet handles
-    # 8: average and novice operators abandon a subtask half as often (0.04 / 0.06): sub-optimal data
-    #    3.33 -> 3.52 objects per episode on its first 160 episodes (paper 3.55); play episodes ask for
-    #    2-6 subtasks equally often (4 on average, was 3.7); demos unchanged
-    # 9: a joint-space transit whose inverse kinematics from the rest posture misses by > 5 cm is solved
-    #    again from fixed offset seeds (tall kettles on the top-right burner were left out of reach)
-    version = "kitchen-randomized-9"
+    version = "kitchen-randomized-9"  # what each version changed: CHANGELOG.md
     name = "d5rl.envs.kitchen.randomized.data:RandomizedKitchenGenerator"  # in the manifests (the code's first home)
 
     def __init__(self, task_id: str | None = None, mode: str = "demos", max_steps: int = MAX_STEPS):
