@@ -14,6 +14,8 @@ from pathlib import Path
 import numpy as np
 
 from d5rl.browse import families
+from d5rl.datasets.generation import dataset_root, full_size
+from d5rl.datasets.loading import load_dataset
 from d5rl.datasets.status import dataset_status, disk_bytes
 from d5rl.errors import D5RLError
 from d5rl.registry import get_spec, list_tasks
@@ -41,8 +43,6 @@ def datacard(spec) -> str | None:
 
 def task_summary(task_id: str, sizes: dict | None = None) -> dict:
     """One task: spec, dataset spec, what is on disk (status, episodes, bytes), score references."""
-    from d5rl.datasets.generation import dataset_root, full_size
-
     spec = get_spec(task_id)
     status, manifest = dataset_status(spec)
     out = {
@@ -98,8 +98,6 @@ class Datasets:
         self._lock = threading.Lock()
 
     def get(self, task_id: str):
-        from d5rl.datasets.loading import load_dataset
-
         spec = get_spec(task_id)
         if spec.dataset is None:
             raise D5RLError(f"{spec.id} has no dataset")

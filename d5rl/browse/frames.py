@@ -30,8 +30,12 @@ import numpy as np
 
 from d5rl import paths
 from d5rl.browse.safe import inside
+from d5rl.datasets import format as fmt
+from d5rl.datasets.generation import dataset_root
+from d5rl.datasets.loading import load_dataset
 from d5rl.files import dump_json, write_atomic
-from d5rl.registry import get_spec
+from d5rl.registry import get_spec, make_replay_env, resolve
+from d5rl.video import replay_frames
 
 CACHE_DIR = "browse-cache"
 MAX_STRIP_WIDTH = 8192  # pixels; browsers and JPEG handle far more, this keeps strips square-ish
@@ -91,9 +95,6 @@ class Frames:
 
     # --- where an episode's strips live ------------------------------------------------------------
     def episode_dir(self, task_id: str, index: int) -> Path:
-        from d5rl.datasets import format as fmt
-        from d5rl.datasets.generation import dataset_root
-
         spec = get_spec(task_id)
         root = dataset_root(spec.dataset)
         digest = hashlib.sha256(json.dumps(fmt.read_manifest(root / fmt.MANIFEST), sort_keys=True).encode())
@@ -165,10 +166,6 @@ def render_cache_episode(spec, index: int) -> dict[str, np.ndarray] | None:
     """
     if spec.dataset is None or spec.dataset.derived is None or spec.observation != "pixels":
         return None
-    from d5rl.datasets import format as fmt
-    from d5rl.datasets.generation import dataset_root
-    from d5rl.datasets.loading import load_dataset
-    from d5rl.registry import resolve
 
     try:
         root = dataset_root(spec.dataset)
@@ -197,8 +194,6 @@ def render_states(spec, states: np.ndarray, meta: dict) -> dict[str, np.ndarray]
         render_episode = getattr(importlib.import_module(derived.partition(":")[0]), "render_episode", None)
         if render_episode is not None:
             return render_episode({"states": np.asarray(states)}, meta)
-    from d5rl.registry import make_replay_env
-    from d5rl.video import replay_frames
 
     env = make_replay_env(spec.id, meta, render_mode="rgb_array")
     try:

@@ -27,6 +27,7 @@ import sys
 from pathlib import Path
 
 from d5rl.errors import D5RLError, is_int
+from d5rl.registry import get_spec
 
 STATIC = Path(__file__).resolve().parent / "static"
 VIDEO_TYPES = {".mp4": "video/mp4", ".webm": "video/webm", ".gif": "image/gif"}
@@ -101,6 +102,7 @@ def create_app(run_dirs: list[Path] | None = None, host: str | None = None):
     from starlette.routing import Mount, Route
     from starlette.staticfiles import StaticFiles
 
+    # start-up time: d5rl's CLI imports this module for its parser; the app's pages load only to serve
     from d5rl.browse import catalog, runs
     from d5rl.browse.frames import Frames, NoFrames
     from d5rl.browse.safe import NotAllowed, file_under
@@ -143,8 +145,6 @@ def create_app(run_dirs: list[Path] | None = None, host: str | None = None):
         return run_dirs[k]
 
     def task_id(request) -> str:
-        from d5rl.registry import get_spec
-
         return get_spec(request.path_params["task"]).id  # only registered ids go further
 
     def page(request):

@@ -29,6 +29,7 @@ from d5rl.errors import D5RLError
 from d5rl.production.a1.agents import AGENTS, EPISODE_STEPS, make_env
 from d5rl.production.a1.buffers import episode_table
 from d5rl.production.a1.policy import SnapshotPolicy
+from d5rl.rollout import rollout
 
 INFO_KEYS = ("forward_speed", "standing", "energy", "heading_error")
 
@@ -88,22 +89,30 @@ class ReplayBufferGenerator:
         agent, seg_i = self.table[index]
         env, policy = self._env(agent), self._policy(agent, seg_i)
         reset_seed = int(rng.integers(2**31))
-        obs, _ = env.reset(seed=reset_seed)
-        observations, states = [obs], [env.get_state()]
-        actions, rews, terms = [], [], []
+        observations, states, actions, rews, terms = [], [], [], [], []
         infos = {k: [] for k in INFO_KEYS}
-        for _ in range(EPISODE_STEPS):
-            action = policy(obs, rng)
-            obs, r, terminated, _, info = env.step(action)
+
+        def on_reset(i, obs, info):
             observations.append(obs)
             states.append(env.get_state())
-            actions.append(action)
-            rews.append(r)
-            terms.append(terminated)
+
+        def on_step(s):
+            observations.append(s.next_obs)
+            states.append(env.get_state())
+            actions.append(s.action)
+            rews.append(s.reward)
+            terms.append(s.terminated)
             for k in INFO_KEYS:
-                infos[k].append(info[k])
-            if terminated:
-                break
+                infos[k].append(s.info[k])
+
+        rollout(
+            [env],
+            lambda obs, live, steps: [policy(obs[0], rng)],
+            [reset_seed],
+            max_steps=EPISODE_STEPS,
+            on_reset=on_reset,
+            on_step=on_step,
+        )
         t = len(actions)
         timeouts = np.zeros(t, bool)
         timeouts[-1] = not terms[-1]

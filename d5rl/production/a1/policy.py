@@ -12,6 +12,8 @@ from pathlib import Path
 
 import numpy as np
 
+from d5rl.rollout import rollout
+
 LOG_STD_MIN, LOG_STD_MAX = -20.0, 2.0
 
 
@@ -64,18 +66,24 @@ def run_episodes(
     """
     rng = np.random.default_rng(seed)
     out: dict[str, list] = {"returns": [], "speeds": [], "lengths": [], "falls": []}
+
+    def act(observations, live, steps):
+        return [policy(observations[0], rng, deterministic=deterministic)]
+
     for i in range(episodes):
-        obs, _ = env.reset(seed=seed * 100_003 + i)
-        total, speeds, term, trunc = 0.0, [], False, False
-        while not (term or trunc) and (max_steps is None or len(speeds) < max_steps):
-            obs, r, term, trunc, info = env.step(policy(obs, rng, deterministic=deterministic))
-            total += r
-            speeds.append(info["forward_speed"])
+        speeds: list[float] = []
+        (ep,) = rollout(
+            [env],
+            act,
+            [seed * 100_003 + i],
+            max_steps=max_steps,
+            on_step=lambda s: speeds.append(s.info["forward_speed"]),
+        )
         for k, v in (
-            ("returns", total),
+            ("returns", ep.ret),
             ("speeds", float(np.mean(speeds))),
-            ("lengths", len(speeds)),
-            ("falls", bool(term)),
+            ("lengths", ep.length),
+            ("falls", ep.terminated),
         ):
             out[k].append(v)
     return out
