@@ -116,7 +116,7 @@ def test_train_bench_and_show_config_pass_the_same_run_spec_for_every_task_and_a
 def test_settings_are_resolved_once_per_d5rl_train(monkeypatch, tmp_path, capsys):
     """One resolution per command, whichever way the code reaches the resolver: every call of ``resolve`` goes
     through ``layers`` (tuned runs), and the spec the trainer gets is the one ``resolve`` returned."""
-    from d5rl.envs.toy.data import toy_dataset
+    from d5rl.production.toy.data import toy_dataset
 
     returned, layered = [], []
     real_resolve, real_layers = settings.resolve, settings.layers
