@@ -91,25 +91,31 @@ def _refuse_waiting_on_parent(root: Path) -> None:
     for this worker: stop it with the fix instead."""
     import multiprocessing as mp
 
-    with contextlib.suppress(OSError, ValueError, IndexError):
-        holder = int((root / WRITE_LOCK).read_text().split()[0])
-        if holder == os.getppid() and getattr(mp.current_process(), "_inheriting", False):
-            err = D5RLError(
-                "a d5rl worker process re-ran the main script, which calls d5rl at top level",
-                'put the script\'s code under `if __name__ == "__main__":` (worker processes import '
-                "the main script), or pass workers=1",
-            )
-            # One line, not a traceback of the main script's import; the parent reports the exit.
-            print(f"d5rl: error: {err}", file=sys.stderr, flush=True)
-            raise SystemExit(1)
+    if _writer(root) == os.getppid() and getattr(mp.current_process(), "_inheriting", False):
+        err = D5RLError(
+            "a d5rl worker process re-ran the main script, which calls d5rl at top level",
+            'put the script\'s code under `if __name__ == "__main__":` (worker processes import '
+            "the main script), or pass workers=1",
+        )
+        # One line, not a traceback of the main script's import; the parent reports the exit.
+        print(f"d5rl: error: {err}", file=sys.stderr, flush=True)
+        raise SystemExit(1)
+
+
+def _writer(root: Path) -> int | None:
+    """The pid the write lock's file names (its last holder), None if it names none (missing, empty: a
+    writer between creating and filling it, or garbage)."""
+    try:
+        return int((root / WRITE_LOCK).read_text().split()[0])
+    except (OSError, ValueError, IndexError):
+        return None
 
 
 def writing(root: str | Path, what: str = "generation") -> contextlib.AbstractContextManager:
     """Exclusive right to write into ``root`` (held for a whole run; others wait)."""
     root = Path(root)
-    owner = ""
-    with contextlib.suppress(OSError, ValueError):
-        owner = f" (pid {int((root / WRITE_LOCK).read_text().split()[0])})"
+    pid = _writer(root)
+    owner = "" if pid is None else f" (pid {pid})"
     return _flock(root, WRITE_LOCK, True, f"waiting for another d5rl process{owner} that is writing {root} ...")
 
 
