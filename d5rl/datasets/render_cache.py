@@ -162,6 +162,33 @@ def render_shard(dataset_shard: str, out_root: str, index: int, fn: str, kwargs:
         raise
 
 
+def observation_cache(
+    spec,
+    root: str | Path,
+    manifest: dict,
+    *,
+    state: str,
+    frames: str,
+    frames_kwargs: dict[str, Any],
+    frames_name: str,
+    episodes: int | None,
+    workers: parallel.Workers,
+    progress: bool,
+) -> list[Path]:
+    """The one derived cache a task of a family with stored states reads: its state observations
+    (``state``, for a ``-state`` task) or its camera frames (``frames(**frames_kwargs)`` under
+    ``frames_name``), each a "module:function" of one episode's arrays and meta (:func:`render_shard`)."""
+    if spec is not None and spec.observation == "state":
+        fn, kwargs, name = state, {}, "state"
+    else:
+        fn, kwargs, name = frames, frames_kwargs, frames_name
+    return [
+        ensure_render_cache(
+            root, manifest, fn, kwargs, name=name, episodes=episodes, workers=workers, progress=progress
+        )
+    ]
+
+
 def ensure_render_cache(
     root: str | Path,
     manifest: dict,

@@ -38,7 +38,7 @@ from typing import Any
 import numpy as np
 
 from d5rl.datasets.episode import Episode
-from d5rl.datasets.render_cache import check_render_args, ensure_render_cache
+from d5rl.datasets.render_cache import check_render_args, observation_cache
 from d5rl.envs.widowx import model as wm
 from d5rl.envs.widowx import scene as wscene
 from d5rl.envs.widowx.registration import MAX_EPISODE_STEPS
@@ -185,29 +185,15 @@ def renders(
     if check or not render:
         return []
 
-    if spec is not None and spec.observation == "state":
-        return [
-            ensure_render_cache(
-                root,
-                manifest,
-                "d5rl.envs.widowx.data:state_episode",
-                {},
-                name="state",
-                episodes=episodes,
-                workers=workers,
-                progress=progress,
-            )
-        ]
-
-    return [
-        ensure_render_cache(
-            root,
-            manifest,
-            "d5rl.envs.widowx.data:render_episode",
-            {"size": int(size)},
-            name=f"side-{int(size)}x{int(size)}",
-            episodes=episodes,
-            workers=workers,
-            progress=progress,
-        )
-    ]
+    return observation_cache(
+        spec,
+        root,
+        manifest,
+        state="d5rl.envs.widowx.data:state_episode",
+        frames="d5rl.envs.widowx.data:render_episode",
+        frames_kwargs={"size": int(size)},
+        frames_name=f"side-{int(size)}x{int(size)}",
+        episodes=episodes,
+        workers=workers,
+        progress=progress,
+    )

@@ -24,7 +24,7 @@ from collections.abc import Sequence
 import numpy as np
 
 from d5rl.datasets.episode import Episode
-from d5rl.datasets.render_cache import check_render_args, ensure_render_cache
+from d5rl.datasets.render_cache import check_render_args, observation_cache
 from d5rl.envs.kitchen.randomized.task import CAMERAS, RandomizedKitchenEnv
 from d5rl.envs.kitchen.subtasks import MIXED, PARTIAL, SUBTASK_NAMES
 from d5rl.errors import D5RLError
@@ -142,29 +142,15 @@ def renders(
     if check or not render:
         return []
 
-    if spec is not None and spec.observation == "state":
-        return [
-            ensure_render_cache(
-                root,
-                manifest,
-                "d5rl.envs.kitchen.data:state_episode",
-                {},
-                name="state",
-                episodes=episodes,
-                workers=workers,
-                progress=progress,
-            )
-        ]
-
-    return [
-        ensure_render_cache(
-            root,
-            manifest,
-            "d5rl.envs.kitchen.randomized.data:render_episode",
-            {"cameras": tuple(cameras), "size": int(size)},
-            name=f"{'+'.join(cameras)}-{int(size)}x{int(size)}",
-            episodes=episodes,
-            workers=workers,
-            progress=progress,
-        )
-    ]
+    return observation_cache(
+        spec,
+        root,
+        manifest,
+        state="d5rl.envs.kitchen.data:state_episode",
+        frames="d5rl.envs.kitchen.randomized.data:render_episode",
+        frames_kwargs={"cameras": tuple(cameras), "size": int(size)},
+        frames_name=f"{'+'.join(cameras)}-{int(size)}x{int(size)}",
+        episodes=episodes,
+        workers=workers,
+        progress=progress,
+    )
