@@ -19,7 +19,8 @@ from d5rl.envs.a1.published import POLICY_DIR
 from d5rl.errors import D5RLError
 from d5rl.production.a1.agents import AGENTS, training_reward
 from d5rl.production.a1.policy import SnapshotPolicy
-from d5rl.training.checkpoint import PREVIOUS, Checkpoint, load_checkpoint, save_checkpoint
+from d5rl.training.checkpoint import Checkpoint, load_checkpoint, save_checkpoint
+from d5rl.training.rundir import RunDir
 
 WORK_DIR = Path("runs") / "a1-experts"  # full checkpoints (with replay buffers): this machine only
 SAVED_DIR = Path("experiments") / "a1-agents"  # committed: policies/, checkpoints/<agents>/, learners/
@@ -83,7 +84,7 @@ def export(work_root: Path = WORK_DIR, saved_root: Path = SAVED_DIR) -> None:
         ckpt = load_checkpoint(run)
         dest = saved_root / "checkpoints" / "+".join(ckpt.state["agents"])
         save_checkpoint(dest, Checkpoint(ckpt.agent, ckpt.state, None))
-        shutil.rmtree(dest / PREVIOUS, ignore_errors=True)
+        shutil.rmtree(RunDir(dest).previous_checkpoint, ignore_errors=True)
         print(f"{run} (step {ckpt.state['t']}) -> {dest}")
     for f in sorted((work_root / "learners").glob("*.msgpack")):
         (saved_root / "learners").mkdir(parents=True, exist_ok=True)
