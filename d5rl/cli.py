@@ -3,10 +3,26 @@
 from __future__ import annotations
 
 import argparse
+import os
 import sys
 from pathlib import Path
 
+import numpy as np
+
+import d5rl
+from d5rl import assets, paths, progress
+from d5rl.datasets.export import export_minari
+from d5rl.datasets.format import disk_full_error
+from d5rl.datasets.generation import dataset_root, full_size, generate, not_imported_error
+from d5rl.datasets.loading import load_dataset
+from d5rl.datasets.references import compare_task
+from d5rl.datasets.status import dataset_status, disk_bytes, human_bytes
+from d5rl.datasets.verify import regenerate_command, verify_dataset
 from d5rl.errors import D5RLError
+from d5rl.parallel import Ray
+from d5rl.progress import progress_bar
+from d5rl.registry import get_spec, list_tasks, make_env, make_replay_env
+from d5rl.video import check_video_path, replay_frames, rollout_frames, write_video
 
 
 def _table(rows: list[list[str]], header: list[str]) -> str:
@@ -16,10 +32,6 @@ def _table(rows: list[list[str]], header: list[str]) -> str:
 
 
 def cmd_list(args) -> int:
-    from d5rl.datasets.generation import full_size
-    from d5rl.datasets.status import dataset_status
-    from d5rl.registry import get_spec, list_tasks
-
     rows = []
     for tid in list_tasks(args.family):
         s = get_spec(tid)
@@ -31,12 +43,6 @@ def cmd_list(args) -> int:
 
 
 def cmd_info(args) -> int:
-    import numpy as np
-
-    from d5rl.datasets.generation import dataset_root, full_size
-    from d5rl.datasets.status import dataset_status, disk_bytes, human_bytes
-    from d5rl.registry import get_spec, make_env
-
     s = get_spec(args.task)
     print(f"{s.id}\n  {s.description}")
     env = make_env(s.id)
@@ -78,8 +84,6 @@ def cmd_info(args) -> int:
             f"{human_bytes(size)}"
         )
         if args.stats:
-            from d5rl.datasets.loading import load_dataset
-
             ds = load_dataset(s.id, generate=False, progress=False)
             returns = np.add.reduceat(np.asarray(ds.rewards, np.float64), ds.episode_starts)
             print(
@@ -97,15 +101,9 @@ def cmd_info(args) -> int:
 
 
 def cmd_generate(args) -> int:
-    from d5rl.datasets.generation import generate
-    from d5rl.parallel import Ray
-    from d5rl.registry import get_spec
-
     workers = Ray(args.ray) if args.ray else args.workers
     root = generate(args.task, seed=args.seed, num_episodes=args.episodes, workers=workers, force=args.force)
     if not args.no_render and get_spec(args.task).dataset.derived is not None:
-        from d5rl.datasets.loading import load_dataset
-
         # builds the derived cache (camera frames at the task's default cameras and size)
         load_dataset(
             args.task, seed=args.seed, episodes=args.episodes, generate=False, in_memory=False, workers=workers
@@ -115,15 +113,10 @@ def cmd_generate(args) -> int:
 
 
 def cmd_verify(args) -> int:
-    from d5rl.datasets.verify import regenerate_command, verify_dataset
-    from d5rl.registry import get_spec
-
     report = verify_dataset(args.task, seed=args.seed, progress=True)
     if report.ok:
         print(f"OK: {report.shards_checked} shards intact in {report.root}")
         if args.reference:
-            from d5rl.datasets.references import compare_task
-
             result = compare_task(args.task, seed=args.seed)
             print(result.message, file=sys.stdout if result.identical else sys.stderr)
             return 0 if result.identical else 1
@@ -149,20 +142,13 @@ def _parse_size(text: str) -> tuple[int, int]:
 
 
 def cmd_render(args) -> int:
-    from d5rl.progress import progress_bar
-    from d5rl.registry import get_spec, make_env, make_replay_env
-    from d5rl.video import check_video_path, replay_frames, rollout_frames, write_video
-
     spec = get_spec(args.task)
     if args.steps is not None and args.steps < 1:
         raise D5RLError(f"--steps must be at least 1, got {args.steps}", "leave it out to render the whole episode")
     out = check_video_path(args.out)
     if args.episode is not None:
-        from d5rl.datasets.loading import load_dataset
-
         if args.episode < 0:
             raise D5RLError(f"--episode must be >= 0, got {args.episode}", "episodes are numbered from 0")
-        from d5rl.datasets.generation import full_size, not_imported_error
 
         n_episodes = full_size(spec.dataset) if spec.dataset is not None else 0
         if spec.dataset is not None and spec.dataset.imported and not n_episodes:
@@ -206,22 +192,16 @@ def cmd_render(args) -> int:
 
 
 def cmd_export_minari(args) -> int:
-    from d5rl.datasets.export import export_minari
-
     path = export_minari(args.task, dataset_id=args.dataset_id, seed=args.seed, episodes=args.episodes)
     print(f"Minari dataset written to {path}")
     return 0
 
 
 def cmd_install_assets(args) -> int:
-    from d5rl import assets
-
     return assets.install(args.packages or None, force=args.force)
 
 
 def build_parser() -> argparse.ArgumentParser:
-    import d5rl
-
     p = argparse.ArgumentParser(prog="d5rl", description="D5RL offline RL benchmark: tasks, datasets, agents.")
     p.add_argument("--version", action="version", version=f"d5rl {d5rl.__version__}")
     sub = p.add_subparsers(dest="command", required=True, metavar="COMMAND")
@@ -324,9 +304,6 @@ _PLUGINS = [
 
 def _os_error(e: OSError) -> D5RLError:
     """A problem of the machine (disk full, permissions) as a one-line error."""
-    from d5rl import paths
-    from d5rl.datasets.format import disk_full_error
-
     where = Path(e.filename) if getattr(e, "filename", None) else paths.home()
     full = disk_full_error(where, e)
     if full is not None:
@@ -339,8 +316,6 @@ def _os_error(e: OSError) -> D5RLError:
 
 def _silence_stdout() -> None:
     """Point stdout at /dev/null so that the interpreter's final flush does not fail again."""
-    import os
-
     try:
         os.dup2(os.open(os.devnull, os.O_WRONLY), sys.stdout.fileno())
     except (AttributeError, OSError, ValueError):  # not a real file (tests) or already closed
@@ -350,10 +325,6 @@ def _silence_stdout() -> None:
 def main(argv: list[str] | None = None) -> int:
     """Run one command; a problem the user can fix is one line on stderr (exit 2), never a traceback
     (set D5RL_DEBUG=1 to see one)."""
-    import os
-
-    from d5rl import progress
-
     parser = build_parser()
     args = parser.parse_args(argv)
     debug = os.environ.get("D5RL_DEBUG", "") not in ("", "0")

@@ -40,6 +40,7 @@ watchdog thread everywhere), so no orphan keeps writing.
 from __future__ import annotations
 
 import contextlib
+import ctypes
 import hashlib
 import importlib
 import json
@@ -48,6 +49,7 @@ import os
 import pickle
 import queue as queue_mod
 import signal
+import socket
 import subprocess
 import sys
 import tempfile
@@ -114,8 +116,6 @@ def die_with_parent(parent_pid: int | None = None) -> None:
     parent_pid = os.getppid() if parent_pid is None else parent_pid
     if sys.platform.startswith("linux"):
         with contextlib.suppress(Exception):
-            import ctypes
-
             ctypes.CDLL("libc.so.6", use_errno=True).prctl(1, int(signal.SIGKILL))  # PR_SET_PDEATHSIG
     if os.getppid() != parent_pid:  # the parent died before the line above took effect
         os._exit(1)
@@ -179,8 +179,6 @@ def _ray_job(fn, job, initializer, initargs, q, check_file: str | None):
     """One job on a Ray worker: check the shared directory, initialize once per process, run."""
     global _SINK
     if check_file is not None and not Path(check_file).exists():
-        import socket
-
         raise D5RLError(
             f"Ray node {socket.gethostname()} cannot see {Path(check_file).parent}",
             "put the dataset directory ($D5RL_HOME) on a filesystem shared by every node, at the same path",
@@ -394,7 +392,7 @@ def connect_ray(address: str | None):
 
 def _run_ray(fn, jobs, address, initializer, initargs, on_message, settle, shared_dir, worker_env=None) -> None:
     ray = connect_ray(address)
-    from ray.util.queue import Queue
+    from ray.util.queue import Queue  # optional (pip install ray): only --ray runs need it
 
     check_file = None
     if shared_dir is not None:

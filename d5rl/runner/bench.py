@@ -22,9 +22,12 @@ import time
 from collections.abc import Iterable
 from pathlib import Path
 
-from d5rl.errors import D5RLError
+from d5rl.datasets.loading import load_dataset
+from d5rl.errors import D5RLError, UnknownTaskError
 from d5rl.files import write_atomic
 from d5rl.parallel import Ray, Tasks
+from d5rl.progress import progress_bar
+from d5rl.registry import get_spec
 from d5rl.runner.execute import clear_job_outputs, record_failure, reset_cell
 from d5rl.runner.grid import DEFAULT_JOB, Cell, GridError, read_cell, same_run, stale_reason
 from d5rl.training.rundir import BENCH_LOG, RunDir
@@ -102,9 +105,6 @@ def prepare_datasets(cells: Iterable[Cell], workers: int | None = None, progress
     the same time.  Returns ``{task: error}`` for tasks whose data could not be prepared
     (their cells then fail with the full traceback in their own directory).
     """
-    from d5rl.errors import UnknownTaskError
-    from d5rl.registry import get_spec
-
     problems = {}
     cells = [c for c in cells if c.job == DEFAULT_JOB]
     for task in dict.fromkeys(c.task for c in cells):
@@ -115,8 +115,6 @@ def prepare_datasets(cells: Iterable[Cell], workers: int | None = None, progress
         if spec.dataset is None:
             continue
         try:
-            from d5rl.datasets.loading import load_dataset
-
             # cells training on a prefix of the data (--set dataset_episodes=N) need only that prefix
             sizes = [c.overrides.get("dataset_episodes") for c in cells if c.task == task]
             episodes = None if any(n is None for n in sizes) else max(int(n) for n in sizes)
@@ -128,8 +126,6 @@ def prepare_datasets(cells: Iterable[Cell], workers: int | None = None, progress
 
 
 def _progress(total: int, initial: int, enabled: bool):
-    from d5rl.progress import progress_bar
-
     return progress_bar(
         total=total, initial=initial, unit="cell", desc="bench", disable=not enabled, dynamic_ncols=True
     )

@@ -4,10 +4,17 @@ and :func:`add_report_parser`."""
 from __future__ import annotations
 
 import argparse
+import fnmatch
 import json
 import sys
 
+from d5rl.agents import AGENTS
 from d5rl.errors import D5RLError
+from d5rl.registry import TASK_ID_RE, base_task, get_spec, list_tasks, resolve
+from d5rl.runner.bench import run_bench
+from d5rl.runner.grid import DEFAULT_JOB, GridError, canonical_algo, expand_grid, parse_assignments, stale_reason
+from d5rl.runner.report import ReportError, write_report
+from d5rl.training.config import check_run
 from d5rl.training.rundir import RunDir
 
 
@@ -17,9 +24,6 @@ def resolve_tasks(names: list[str]) -> list[str]:
     made yet (``DatasetSpec.unavailable``: an explicit id says why), a glob (``'kitchen-*-state-v0'``)
     for those it matches.  A prefix or glob takes a task on a dataset variant (``...-human-v0``) only when
     it names the variant: its dataset may not be on this machine."""
-    import fnmatch
-
-    from d5rl.registry import TASK_ID_RE, base_task, get_spec, list_tasks
 
     def tasks_for(part: str) -> list[str]:
         words = set(part.replace("*", "-").split("-"))
@@ -55,12 +59,8 @@ def resolve_tasks(names: list[str]) -> list[str]:
 
 
 def _check_algos(algos: list[str], job: str) -> list[str]:
-    from d5rl.runner.grid import DEFAULT_JOB, GridError, canonical_algo
-
     names = [canonical_algo(a) for part in algos for a in part.split(",") if a.strip()]
     if job == DEFAULT_JOB:
-        from d5rl.agents import AGENTS
-
         unknown = [a for a in names if a not in AGENTS]
         if unknown:
             raise GridError(f"unknown algorithms {unknown}", f"choose from {', '.join(AGENTS)}")
@@ -69,8 +69,6 @@ def _check_algos(algos: list[str], job: str) -> list[str]:
 
 def _seeds(values: list[str]) -> list[int]:
     """``0 1 2``, ``0,1,2`` or ``0-2``: non-negative integers, ranges ascending."""
-    from d5rl.runner.grid import GridError
-
     out = []
     for v in values:
         for part in (p.strip() for p in v.split(",") if p.strip()):
@@ -85,8 +83,6 @@ def _seeds(values: list[str]) -> list[int]:
 
 
 def _check_resources(args) -> None:
-    from d5rl.runner.grid import GridError
-
     for name, v, ok, want in (
         ("--workers", args.workers, args.workers is None or args.workers >= 0, ">= 0"),
         ("--max-attempts", args.max_attempts, args.max_attempts >= 1, ">= 1"),
@@ -99,10 +95,6 @@ def _check_resources(args) -> None:
 
 
 def cmd_bench(args) -> int:
-    from d5rl.registry import resolve
-    from d5rl.runner.bench import run_bench
-    from d5rl.runner.grid import DEFAULT_JOB, GridError, expand_grid, parse_assignments
-
     try:  # import the job first: a custom job's module may register its own tasks
         resolve(args.job)
     except (ImportError, AttributeError, ValueError) as e:
@@ -112,8 +104,6 @@ def cmd_bench(args) -> int:
     seeds = _seeds(args.seeds)
     _check_resources(args)
     if args.job == DEFAULT_JOB:
-        from d5rl.training.config import check_run
-
         for seed in seeds:
             check_run(args.offline_steps, args.online_steps, seed)
     protocol = {}
@@ -163,8 +153,6 @@ def cmd_bench(args) -> int:
     )
     print(result.summary(), file=sys.stderr)
     if not args.no_report:  # also after failures: the report lists the unfinished cells
-        from d5rl.runner.report import ReportError, write_report
-
         try:
             path = write_report(args.out)
             print(f"report: {path}", file=sys.stderr)
@@ -175,8 +163,6 @@ def cmd_bench(args) -> int:
 
 def _cell_status(cell, run_dir) -> str:
     """ "done", "stale: <why>" (finished on data the task no longer has: it would run again) or "to run"."""
-    from d5rl.runner.grid import stale_reason
-
     cdir = cell.directory(run_dir)
     if not RunDir(cdir).is_done():
         return "to run"
@@ -186,8 +172,6 @@ def _cell_status(cell, run_dir) -> str:
 
 def _resolved_summary(cell, job: str) -> str:
     """What d5rl's trainer will run a cell with (the settings file under the user's values)."""
-    from d5rl.runner.grid import DEFAULT_JOB
-
     if job != DEFAULT_JOB:
         return f"{cell.overrides} {cell.protocol}"
     r = cell.spec()
@@ -195,8 +179,6 @@ def _resolved_summary(cell, job: str) -> str:
 
 
 def cmd_report(args) -> int:
-    from d5rl.runner.report import write_report
-
     path = write_report(
         args.run_dir, args.out, reps=args.reps, seed=args.seed, plots=not args.no_plots, videos=args.videos
     )
@@ -205,8 +187,6 @@ def cmd_report(args) -> int:
 
 
 def add_bench_parser(subparsers) -> argparse.ArgumentParser:
-    from d5rl.agents import AGENTS
-
     q = subparsers.add_parser(
         "bench",
         help="train a grid of tasks × algorithms × seeds (resumable; local processes or Ray)",

@@ -140,4 +140,3 @@ def execute_cell(cell_json: dict, cell_dir: str, attempt: int = 1, capture_outpu
         }
         RunDir(cdir).write_done(done)
         return {"status": "ok", "key": cell.key, "wall_s": wall}
-

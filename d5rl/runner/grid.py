@@ -17,6 +17,7 @@ from pathlib import Path
 
 from d5rl.agents import canonical_name as canonical_algo
 from d5rl.agents import get_agent
+from d5rl.datasets.generation import stale_data
 from d5rl.errors import D5RLError
 from d5rl.files import read_json
 from d5rl.settings import resolve, run_steps
@@ -166,8 +167,6 @@ def stale_reason(cell: Cell, cell_dir: Path) -> str | None:
     """Why a cell's result no longer describes what the same command would train, or None (current, or
     nothing recorded to tell): its task's data changed (dataset or generator version), or, for d5rl's
     trainer, its agent's code (:attr:`d5rl.agents.common.Agent.version`) or the settings it resolves to."""
-    from d5rl.datasets.generation import stale_data
-
     return stale_data(cell.task, trained_on(cell_dir)) or stale_agent(cell, cell_dir)
 
 

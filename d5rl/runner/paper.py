@@ -9,6 +9,9 @@ row (see :func:`paper_task`), which the report says next to the table.
 
 from __future__ import annotations
 
+from d5rl.errors import D5RLError
+from d5rl.registry import base_task
+
 # {table: {task: {algo: (mean, std or None)}}}
 PAPER: dict[str, dict[str, dict[str, tuple[float, float | None]]]] = {
     "offline": {  # Table 1
@@ -179,9 +182,6 @@ PAPER: dict[str, dict[str, dict[str, tuple[float, float | None]]]] = {
 def paper_task(task: str) -> str:
     """The paper's row for one of our tasks: a ``-state`` twin maps to its camera task, a task on a
     dataset variant (the kitchen's imported human data) to the task it re-uses."""
-    from d5rl.errors import D5RLError
-    from d5rl.registry import base_task
-
     try:
         task = base_task(task)
     except D5RLError:  # a task only a custom job knows

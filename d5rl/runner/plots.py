@@ -9,11 +9,11 @@ from d5rl.runner.results import CellResult, mean_curves, method_name
 
 def plot_curves(results: list[CellResult], out_dir: Path) -> list[Path]:
     """One PNG per task: normalized score against gradient steps, mean ± std over seeds per method."""
-    try:  # matplotlib: optional (pip install matplotlib); the report says when it is missing
-        import matplotlib
+    try:
+        import matplotlib  # optional (pip install matplotlib): the report says when it is missing
 
         matplotlib.use("Agg")
-        import matplotlib.pyplot as plt
+        import matplotlib.pyplot as plt  # optional, as above
     except ImportError:
         return []
     out_dir.mkdir(parents=True, exist_ok=True)

@@ -24,6 +24,7 @@ from pathlib import Path
 import numpy as np
 
 from d5rl.errors import D5RLError
+from d5rl.training.envs import load_task_dataset
 
 
 def q_of(agent, observations, actions) -> np.ndarray:
@@ -44,7 +45,7 @@ def q_probe(agent, batch: dict, rng: np.random.Generator) -> dict:
             f"the Q probe needs flat state observations, got shape {np.shape(obs)}",
             "probe a run on a state task (kitchen and WidowX: their -state twins)",
         )
-    import jax
+    import jax  # JAX (the train extra): loaded by the commands that need it
 
     policy = np.asarray(agent.eval_actions(obs, seed=jax.random.PRNGKey(0)), np.float32)  # diffusion, flow: seeded
     uniform = rng.uniform(-1.0, 1.0, act.shape).astype(np.float32)
@@ -62,8 +63,7 @@ def q_probe(agent, batch: dict, rng: np.random.Generator) -> dict:
 
 def probe_run(run_dir: str | Path, samples: int = 2048, seed: int = 0) -> dict:
     """:func:`q_probe` of a run directory's latest checkpoint on ``samples`` transitions of its task."""
-    from d5rl.training.envs import load_task_dataset
-    from d5rl.training.loop import load_run
+    from d5rl.training.loop import load_run  # JAX (the train extra): loaded by the commands that need it
 
     if not 1 <= samples <= 1_000_000:
         raise D5RLError(f"--samples {samples} is not between 1 and 1,000,000", "pass e.g. --samples 2048")

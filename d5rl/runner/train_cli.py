@@ -7,13 +7,15 @@ import json
 import sys
 
 from d5rl import settings
+from d5rl.agents import AGENTS
+from d5rl.agents.config import ConfigError
+from d5rl.errors import D5RLError
+from d5rl.registry import get_spec, make_env
 from d5rl.settings import run_steps
 from d5rl.training.config import check_run
 
 
 def add_train_parser(subparsers) -> argparse.ArgumentParser:
-    from d5rl.agents import AGENTS
-
     p = subparsers.add_parser(
         "train",
         help="train a reference agent offline (and optionally fine-tune online)",
@@ -89,9 +91,8 @@ def add_eval_parser(subparsers) -> argparse.ArgumentParser:
 
 
 def cmd_eval(args) -> int:
-    from d5rl.agents.config import ConfigError
-    from d5rl.training.evaluation import evaluate
-    from d5rl.training.loop import load_run
+    from d5rl.training.evaluation import evaluate  # JAX (the train extra): loaded by the commands that need it
+    from d5rl.training.loop import load_run  # JAX (the train extra): loaded by the commands that need it
 
     for name, v in (("--episodes", args.episodes), ("--envs", args.envs)):
         if v < 1:
@@ -130,9 +131,6 @@ def cmd_eval(args) -> int:
 
 def _check_same_spaces(trained_on: str, task: str) -> None:
     """An agent runs on another task only if that task has the same observation and action spaces."""
-    from d5rl.errors import D5RLError
-    from d5rl.registry import get_spec, make_env
-
     spaces = {}
     for tid in (trained_on, task):
         env = make_env(get_spec(tid).id)

@@ -20,8 +20,9 @@ import numpy as np
 
 from d5rl.rollout import Step, rollout
 from d5rl.runner.results import METHODS, method_name
+from d5rl.training.envs import episode_scorer, make_task_env
 from d5rl.training.rundir import RunDir
-from d5rl.video import write_gif
+from d5rl.video import FrameRenderer, write_gif
 
 GIFS = "videos"  # the report's folder of rollout GIFs and their captions.json
 GIF_SIZE = (120, 160)  # (height, width) of the frames
@@ -41,8 +42,6 @@ def _episode(agent, env, task: str, seed: int, camera=None, every: int = EVERY):
     """``(normalized score or return, frames)`` of one evaluation episode (frames only with a camera: after the
     reset, every ``every``-th step and after the last)."""
     import jax  # the train extra: a report without videos does not need it
-
-    from d5rl.training.envs import episode_scorer
 
     key = jax.random.PRNGKey(seed)
 
@@ -72,9 +71,7 @@ def _episode(agent, env, task: str, seed: int, camera=None, every: int = EVERY):
 def typical_rollout(cell_dir: Path, task: str, *, episodes: int = 5, size=GIF_SIZE, every: int = EVERY):
     """The median-scoring of ``episodes`` evaluation episodes (seeds 0, 1, ...; the lower seed on ties) of
     the agent saved in ``cell_dir``: ``(frames, frames per second, its seed, every episode's score)``."""
-    from d5rl.training.envs import make_task_env
-    from d5rl.training.loop import load_run
-    from d5rl.video import FrameRenderer
+    from d5rl.training.loop import load_run  # JAX (the train extra): loaded by the commands that need it
 
     agent, resolved = load_run(cell_dir)
     env = make_task_env(task, resolved["train"]["frame_stack"], render_mode="rgb_array")  # envs without a

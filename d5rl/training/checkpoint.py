@@ -236,7 +236,7 @@ def load_checkpoint(run_dir: str | Path, warn=None) -> Checkpoint | None:
 
 def restore_agent(agent, ckpt: Checkpoint):
     """``agent.from_bytes`` with a one-line error when the saved agent does not fit this one."""
-    import jax
+    import jax  # JAX: only restoring an agent needs it; reading and writing checkpoints does not
 
     hint = "the run's config.json, data and checkpoint disagree; start a new --run-dir"
     try:

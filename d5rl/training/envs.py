@@ -6,12 +6,13 @@ import functools
 
 import gymnasium as gym
 
+from d5rl.datasets.loading import load_dataset
+from d5rl.envs.wrappers import FrameStack
+from d5rl.registry import episode_score, get_spec, make_env
+
 
 def make_task_env(task_id: str, frame_stack: int = 1, render_mode: str | None = None, **kwargs) -> gym.Env:
     """The task's env, with pixel frame stacking when ``frame_stack > 1``."""
-    from d5rl.envs.wrappers import FrameStack
-    from d5rl.registry import make_env
-
     env = make_env(task_id, **({"render_mode": render_mode} if render_mode else {}), **kwargs)
     if frame_stack > 1 and isinstance(env.observation_space, gym.spaces.Dict):
         env = FrameStack(env, frame_stack)
@@ -24,8 +25,6 @@ def env_factory(task_id: str, frame_stack: int = 1, render_mode: str | None = No
 
 
 def load_task_dataset(task_id: str, **kwargs):
-    from d5rl.datasets.loading import load_dataset
-
     return load_dataset(task_id, **kwargs)
 
 
@@ -35,8 +34,6 @@ def episode_scorer(task_id: str):
     Tasks score either from the return (A1: random = 0, expert = 1) or from the last
     step's ``info["score"]`` (kitchen, WidowX); :func:`d5rl.episode_score` knows which.
     """
-    from d5rl.registry import episode_score, get_spec
-
     spec = get_spec(task_id)
     if spec.score_from == "return" and spec.score is None:
         return None

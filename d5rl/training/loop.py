@@ -24,6 +24,8 @@ from d5rl.agents import get_agent
 from d5rl.agents.config import Config
 from d5rl.agents.encoders import is_pixel_obs
 from d5rl.datasets.dataset import mc_tail
+from d5rl.datasets.format import disk_full_error
+from d5rl.datasets.generation import RESULT_IDENTITY_KEYS
 from d5rl.files import lock_holder, try_lock
 from d5rl.progress import progress_bar
 from d5rl.training.checkpoint import Checkpoint, check_state, load_checkpoint, restore_agent, save_checkpoint
@@ -114,8 +116,6 @@ def train(spec: RunSpec, run_dir: str | Path | None = None, *, dataset=None) -> 
         try:
             return _train_locked(spec, agent_cls, agent_cfg, sampler, example, run_dir, ds)
         except OSError as e:
-            from d5rl.datasets.format import disk_full_error
-
             full = disk_full_error(
                 run_dir,
                 e,
@@ -195,8 +195,6 @@ def _finished_summary(run_dir: Path, step: int, total: int) -> dict | None:
 def _data_record(ds) -> dict | None:
     """The dataset a run trains on (its identity and the episodes used), for config.json; None for data
     that is not a generated d5rl dataset (in-memory test data)."""
-    from d5rl.datasets.generation import RESULT_IDENTITY_KEYS
-
     meta = getattr(ds, "metadata", {}) or {}
     if not all(k in meta for k in RESULT_IDENTITY_KEYS):
         return None
