@@ -78,9 +78,6 @@ class RunDir:
     def __repr__(self) -> str:
         return f"RunDir({str(self.path)!r})"
 
-    def __fspath__(self) -> str:
-        return str(self.path)
-
     # --- paths -----------------------------------------------------------------------------------------------
     config = property(lambda self: self.path / CONFIG)
     checkpoint = property(lambda self: self.path / CHECKPOINT)
