@@ -166,11 +166,6 @@ def test_every_unit_has_a_floor():
     assert sorted({_unit(m) for m in MODULES} - set(FLOOR)) == []
 
 
-# Function-local imports without a reason are left in the run pipeline (runner, training, CLI); the test fails
-# as soon as a unit has none, so that it comes off this list.
-SILENT_LAZY_IMPORTS_LEFT = ("d5rl.cli", "d5rl.runner", "d5rl.training")
-
-
 def test_imports_run_down_the_floors():
     upward = [
         f"{imp} ({_unit(imp.source)} floor {FLOOR[_unit(imp.source)]} -> {_unit(imp.target)} "
@@ -189,9 +184,8 @@ def test_no_import_circles(level):
 
 def test_function_local_imports_say_why():
     """A function-local import is for an optional dependency or for start-up time, and its comment says so."""
-    silent = [i for i in IMPORTS if i.local and not i.commented]
-    assert [repr(i) for i in silent if _unit(i.source) not in SILENT_LAZY_IMPORTS_LEFT] == []
-    assert sorted({_unit(i.source) for i in silent}) == sorted(SILENT_LAZY_IMPORTS_LEFT)
+    silent = [repr(i) for i in IMPORTS if i.local and not i.commented]
+    assert silent == []
 
 
 def test_the_checks_can_fail():
