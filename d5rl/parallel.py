@@ -493,7 +493,7 @@ class Tasks:
         env["PYTHONPATH"] = os.pathsep.join([pkg_root] + [p for p in env.get("PYTHONPATH", "").split(os.pathsep) if p])
         fd, result = tempfile.mkstemp(prefix="d5rl-task-", suffix=".json")
         os.close(fd)
-        argv = [sys.executable, "-c", _WORKER, result, str(key)]  # the key: which task it is, in `ps`
+        argv = [sys.executable, "-c", _WORKER, result, str(os.getpid()), str(key)]  # the key: which task, in `ps`
         proc = subprocess.Popen(argv, env=env, stdin=subprocess.PIPE)
         proc.stdin.write(json.dumps(spec).encode())
         proc.stdin.close()
@@ -576,9 +576,9 @@ _WORKER = "import sys; from d5rl.parallel import _task_main; sys.exit(_task_main
 
 
 def _task_main(argv: list[str]) -> int:
-    """One task of :class:`Tasks` in this fresh process (``argv``: the result file, the task's key): its spec
-    read from stdin, its result written as JSON (``{"value": ...}`` or ``{"error": ..., "traceback": ...}``)."""
-    die_with_parent()  # no orphan races the caller's next attempt
+    """One task of :class:`Tasks` in this fresh process (``argv``: the result file, the caller's pid, the task's
+    key): its spec read from stdin, its result written as JSON (``{"value": ...}`` or ``{"error": ..., "traceback": ...}``)."""
+    die_with_parent(int(argv[1]))  # no orphan races the caller's next attempt, even if the caller died first
     spec = json.loads(sys.stdin.buffer.read())
     configure_worker(spec["single_thread"], spec["nice"])  # before JAX is imported
     for p in reversed(spec["sys_path"]):
