@@ -164,6 +164,23 @@ class A1State:
     def torques(self):
         return self.data.actuator_force.copy()
 
+    def observation(self, heading_error: float | None = None) -> np.ndarray:
+        """The policy's observation: joint positions, velocities and torques, the gyro, the trunk's local
+        velocity and orientation, the previous action, and (directed tasks) the heading error as sin, cos.
+        The env also sets ``_prev_action``."""
+        parts = [
+            self.joint_pos(),
+            self.joint_vel(),
+            self.torques(),
+            self.data.sensordata[self.idx.gyro],
+            self.local_velocity(),
+            self.body_quat(),
+            self._prev_action,
+        ]
+        if heading_error is not None:
+            parts.append([np.sin(heading_error), np.cos(heading_error)])
+        return np.concatenate(parts).astype(np.float32)
+
     def body_quat(self):
         return self.data.qpos[3:7]
 

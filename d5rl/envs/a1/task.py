@@ -201,19 +201,7 @@ class A1Env(A1State, MujocoEnv):
         return float(_wrap(self.task.desired_heading(self) - yaw))
 
     def _obs(self) -> np.ndarray:
-        parts = [
-            self.joint_pos(),
-            self.joint_vel(),
-            self.torques(),
-            self.data.sensordata[self.idx.gyro],
-            self.local_velocity(),
-            self.body_quat(),
-            self._prev_action,
-        ]
-        if self.task.directed:
-            err = self._heading_error()
-            parts.append([np.sin(err), np.cos(err)])
-        return np.concatenate(parts).astype(np.float32)
+        return self.observation(self._heading_error() if self.task.directed else None)
 
     def reset(self, *, seed: int | None = None, options: dict | None = None):
         super().reset(seed=seed)

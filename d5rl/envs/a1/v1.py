@@ -310,19 +310,7 @@ class A1EnvV1(A1State, MujocoEnv):
 
     # --- episode -------------------------------------------------------------------------------
     def _obs(self) -> np.ndarray:
-        parts = [
-            self.joint_pos(),
-            self.joint_vel(),
-            self.torques(),
-            self.data.sensordata[self.idx.gyro],
-            self.local_velocity(),
-            self.body_quat(),
-            self._prev_action,
-        ]
-        if self.task.directed:
-            err = self.task.heading_error(self)
-            parts.append([np.sin(err), np.cos(err)])
-        return np.concatenate(parts).astype(np.float32)
+        return self.observation(self.task.heading_error(self) if self.task.directed else None)
 
     def _place_robot(self, x: float, y: float) -> None:
         """Nominal pose, level, at rest, at the lowest height on the release's 1 cm grid where nothing touches."""
