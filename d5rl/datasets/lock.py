@@ -86,8 +86,9 @@ def _flock(root: Path, name: str, exclusive: bool, waiting: str | None = None) -
 
 
 def _refuse_waiting_on_parent(root: Path) -> None:
-    """A worker process re-running its parent's main script (spawn does, for a script without
-    ``if __name__ == "__main__":``) would wait forever for the lock its parent holds while it waits
+    """A worker process re-running its parent's main script (a d5rl worker does when a task names something
+    the script defines, as ``spawn`` does; see :mod:`d5rl.parallel`), for a script without
+    ``if __name__ == "__main__":``, would wait forever for the lock its parent holds while it waits
     for this worker: stop it with the fix instead."""
     import multiprocessing as mp
 

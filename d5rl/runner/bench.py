@@ -25,7 +25,7 @@ from pathlib import Path
 from d5rl.datasets.loading import load_dataset
 from d5rl.errors import D5RLError, UnknownTaskError
 from d5rl.files import write_atomic
-from d5rl.parallel import Ray, Tasks
+from d5rl.parallel import Executor, Ray
 from d5rl.progress import progress_bar
 from d5rl.registry import get_spec
 from d5rl.runner.execute import clear_job_outputs, record_failure, reset_cell
@@ -178,7 +178,9 @@ def run_bench(
     else:
         backend = 0 if workers == 0 else workers or default_workers()
     try:
-        with Tasks(backend, single_thread=single_thread, nice=nice, cpus=cpus_per_cell, gpus=gpus_per_cell) as tasks:
+        with Executor(
+            backend, fresh=True, single_thread=single_thread, nice=nice, cpus=cpus_per_cell, gpus=gpus_per_cell
+        ) as tasks:
             _run(pending, run_dir, result, bar, tasks, max_attempts, capture_output=backend != 0)
     finally:
         bar.close()
@@ -212,7 +214,9 @@ def _settle(
     bar.set_postfix(ok=len(result.ok), failed=len(result.failed), refresh=False)
 
 
-def _run(pending: list[Cell], run_dir: Path, result: BenchResult, bar, tasks: Tasks, max_attempts: int, capture_output):
+def _run(
+    pending: list[Cell], run_dir: Path, result: BenchResult, bar, tasks: Executor, max_attempts: int, capture_output
+):
     """Run the cells through ``tasks`` (one :func:`~d5rl.runner.execute.execute_cell` each), retrying a failed
     cell while it has attempts left; a worker that died before recording anything is recorded here."""
     queue = collections.deque(pending)
