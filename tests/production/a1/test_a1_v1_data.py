@@ -19,6 +19,8 @@ import pytest
 import d5rl
 from d5rl.datasets.loading import load_dataset
 from d5rl.envs.a1 import arenas, v1
+from d5rl.envs.a1.published import buffer_episodes
+from d5rl.envs.a1.registration import HIKING_AGENTS_V1, SPEED_AGENTS_V1
 from d5rl.production.a1 import data as a1_data
 from d5rl.production.a1.agents import AGENTS
 from d5rl.production.a1.data import replay_env
@@ -105,10 +107,17 @@ def test_generation_runs_the_policies_without_xla():
 
 
 def test_v1_datasets_are_portable_and_replay_their_scenes():
-    for task in ("a1-walk-v1", "a1-run-v1", "a1-hiking-v1"):
+    for task, agents in (
+        ("a1-walk-v1", SPEED_AGENTS_V1),
+        ("a1-run-v1", SPEED_AGENTS_V1),
+        ("a1-hiking-v1", HIKING_AGENTS_V1),
+    ):
         dspec = d5rl.get_spec(task).dataset
         assert dspec.numerics == "portable" and dspec.replay == "d5rl.production.a1.data:replay_env"
-        assert "not published yet" in dspec.unavailable
+        if buffer_episodes(agents):  # published: the size is what the agents' training logs say they collected
+            assert dspec.unavailable is None and dspec.num_episodes == buffer_episodes(agents) > 100
+        else:
+            assert "not published yet" in dspec.unavailable
 
 
 def test_generated_v1_hiking_data_replays_on_its_own_floors(hiking_data):
