@@ -26,6 +26,11 @@ LEGS = ("FR", "FL", "RR", "RL")
 JOINTS = tuple(f"{leg}_{part}_joint" for leg in LEGS for part in ("hip", "thigh", "calf"))
 
 
+def wrap_angle(a: float) -> float:
+    """``a`` in radians, wrapped into [-pi, pi)."""
+    return float((a + np.pi) % (2 * np.pi) - np.pi)
+
+
 @dataclasses.dataclass(frozen=True)
 class Course:
     """The hiking course: a heightfield with rolling bumps and two ramps, and waypoints on y = 0."""

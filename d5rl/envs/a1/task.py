@@ -7,7 +7,17 @@ import mujoco
 import numpy as np
 
 from d5rl.envs.a1 import rewards
-from d5rl.envs.a1.model import ACTION_SCALE, CONTROL_DT, NOMINAL_POSE, PHYSICS_DT, A1State, Course, Indices, build_model
+from d5rl.envs.a1.model import (
+    ACTION_SCALE,
+    CONTROL_DT,
+    NOMINAL_POSE,
+    PHYSICS_DT,
+    A1State,
+    Course,
+    Indices,
+    build_model,
+    wrap_angle,
+)
 from d5rl.envs.base import MujocoEnv
 
 MAX_TILT = np.deg2rad(60.0)
@@ -21,10 +31,6 @@ def _euler_from_quat(q):
     pitch = np.arcsin(np.clip(2 * (w * y - z * x), -1.0, 1.0))
     yaw = np.arctan2(2 * (w * z + x * y), 1 - 2 * (y * y + z * z))
     return roll, pitch, yaw
-
-
-def _wrap(a):
-    return (a + np.pi) % (2 * np.pi) - np.pi
 
 
 class Command:
@@ -82,7 +88,7 @@ class Heading(Directed):
 
     def after_step(self, env, rng):
         if env.steps % self.change_steps == 0:
-            self.heading = float(_wrap(self.heading + rng.uniform(-np.pi / 2, np.pi / 2)))
+            self.heading = wrap_angle(self.heading + rng.uniform(-np.pi / 2, np.pi / 2))
 
     def desired_heading(self, env):
         return self.heading
@@ -198,7 +204,7 @@ class A1Env(A1State, MujocoEnv):
     # --- task -------------------------------------------------------------------------------------
     def _heading_error(self) -> float:
         _, _, yaw = _euler_from_quat(self.body_quat())
-        return float(_wrap(self.task.desired_heading(self) - yaw))
+        return wrap_angle(self.task.desired_heading(self) - yaw)
 
     def _obs(self) -> np.ndarray:
         return self.observation(self._heading_error() if self.task.directed else None)

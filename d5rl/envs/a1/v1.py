@@ -13,7 +13,17 @@ import mujoco
 import numpy as np
 
 from d5rl.envs.a1 import arenas, rewards
-from d5rl.envs.a1.model import ACTION_SCALE, CONTROL_DT, JOINTS, NOMINAL_POSE, PHYSICS_DT, A1State, Indices, build_spec
+from d5rl.envs.a1.model import (
+    ACTION_SCALE,
+    CONTROL_DT,
+    JOINTS,
+    NOMINAL_POSE,
+    PHYSICS_DT,
+    A1State,
+    Indices,
+    build_spec,
+    wrap_angle,
+)
 from d5rl.envs.base import MujocoEnv
 
 ACTION_RANGE = 3.0  # joint targets span nominal ± ACTION_RANGE × ACTION_SCALE (the release's ACTION_OFFSET)
@@ -50,10 +60,6 @@ def action_box(model: mujoco.MjModel) -> tuple[np.ndarray, np.ndarray]:
     low = np.maximum(NOMINAL_POSE - ACTION_RANGE * ACTION_SCALE, ranges[:, 0])
     high = np.minimum(NOMINAL_POSE + ACTION_RANGE * ACTION_SCALE, ranges[:, 1])
     return low, high
-
-
-def _wrap(a: float) -> float:
-    return float((a + np.pi) % (2 * np.pi) - np.pi)
 
 
 class Task:
@@ -156,7 +162,7 @@ class RunToward(Task):
         the ±π line as almost straight behind."""
         d = self.target(env) - env.data.qpos[:2]
         x_axis = env.data.xmat[env.trunk_id].reshape(3, 3)[:2, 0]
-        return _wrap(np.arctan2(d[1], d[0]) - np.arctan2(x_axis[1], x_axis[0]))
+        return wrap_angle(np.arctan2(d[1], d[0]) - np.arctan2(x_axis[1], x_axis[0]))
 
     def forward_speed(self, env) -> float:
         _, pitch, _ = euler_xyz(env.body_quat())
