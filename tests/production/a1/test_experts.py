@@ -36,27 +36,15 @@ def test_narrow_band_rewards_the_target_not_the_slow_edge():
     assert rewards.speed_term(0.9, 1.0) == 1.0
 
 
-def _train(tmp_path, name, max_minutes=None):
-    from d5rl.production.a1.experts import Trainer
+def test_trainer_writes_snapshots_logs_and_resumes_bit_for_bit(tmp_path, small_trainer):
+    def train(name, max_minutes=None):
+        t = small_trainer(["speed-0.5", "run-1.25"], tmp_path / name / "work", policy_dir=tmp_path / name / "policies")
+        return t.run(max_minutes=max_minutes, log_every=10**9)
 
-    t = Trainer(
-        ["speed-0.5", "run-1.25"],
-        steps=90,
-        seed=0,
-        snapshot_every=30,
-        start_steps=30,
-        utd=1,
-        work_dir=tmp_path / name / "work",
-        policy_dir=tmp_path / name / "policies",
-    )
-    return t.run(max_minutes=max_minutes, log_every=10**9)
-
-
-def test_trainer_writes_snapshots_logs_and_resumes_bit_for_bit(tmp_path):
-    assert _train(tmp_path, "straight")
+    assert train("straight")
     # the same run stopped at every snapshot boundary and resumed
     stops = 0
-    while not _train(tmp_path, "resumed", max_minutes=0):
+    while not train("resumed", max_minutes=0):
         stops += 1
     assert stops == 2  # boundaries at steps 30 and 60 (start_steps 30, snapshot_every 30)
     for agent in ("speed-0.5", "run-1.25"):
@@ -88,56 +76,31 @@ def test_snapshot_boundaries_double_from_the_first_segment():
     assert sorted(boundaries(30, 30, 30, 90)) == [30, 60, 90]
 
 
-def test_trainer_snapshots_on_the_doubling_schedule(tmp_path):
-    from d5rl.production.a1.experts import Trainer
-
-    policies = tmp_path / "policies"
-    Trainer(
-        ["speed-0.5"],
-        steps=75,
-        seed=0,
-        snapshot_every=20,
-        start_steps=30,
-        utd=1,
-        work_dir=tmp_path / "work",
-        policy_dir=policies,
-        first_segment=5,
-    ).run(log_every=10**9)
-    log = json.loads((policies / "speed-0.5" / "log.json").read_text())
+def test_trainer_snapshots_on_the_doubling_schedule(tmp_path, small_trainer):
+    small_trainer(["speed-0.5"], tmp_path / "work", steps=75, snapshot_every=20, first_segment=5).run(log_every=10**9)
+    log = json.loads((tmp_path / "policies" / "speed-0.5" / "log.json").read_text())
     assert [s["start_step"] for s in log["segments"]] == [0, 30, 35, 45, 65]
     assert [s["steps"] for s in log["segments"]] == [30, 5, 10, 20, 10]
     assert log["first_segment"] == 5
 
 
-def test_trainer_refuses_mixed_observation_sizes(tmp_path):
-    from d5rl.production.a1.experts import Trainer
-
+def test_trainer_refuses_mixed_observation_sizes(tmp_path, small_trainer):
     with pytest.raises(ValueError, match="observation sizes"):
-        Trainer(["speed-0.5", "heading"], 10, 0, 5, 5, 1, tmp_path)
+        small_trainer(["speed-0.5", "heading"], tmp_path, steps=10, snapshot_every=5, start_steps=5)
 
 
 @pytest.mark.slow
-def test_v1_agents_train_resume_from_an_export_and_check(tmp_path, capsys):
+def test_v1_agents_train_resume_from_an_export_and_check(tmp_path, capsys, small_trainer):
     """The v1 agents (the release's tasks) go through the same trainer: snapshots, export without buffers,
     resume elsewhere with the buffer refilled on the v1 envs, a reference trained from a data agent, check."""
-    from d5rl.production.a1.experts import Trainer, main
+    from d5rl.production.a1.experts import main
     from d5rl.production.a1.resume import export
 
     policies, saved = tmp_path / "policies", tmp_path / "saved"
 
-    def trainer(machine, agents=("goals-mixed-v1", "goals-smooth-v1"), **kw):
-        return Trainer(
-            list(agents),
-            steps=40,
-            seed=0,
-            snapshot_every=20,
-            start_steps=20,
-            utd=1,
-            work_dir=tmp_path / machine / "+".join(agents),
-            policy_dir=policies,
-            saved_root=saved,
-            **kw,
-        )
+    def trainer(machine, agents=("goals-mixed-v1", "goals-smooth-v1")):
+        work = tmp_path / machine / "+".join(agents)
+        return small_trainer(agents, work, steps=40, snapshot_every=20, start_steps=20, saved_root=saved)
 
     assert not trainer("a").run(max_minutes=0, log_every=10**9)  # stops at the first boundary (step 20)
     export(tmp_path / "a", saved)
@@ -150,15 +113,12 @@ def test_v1_agents_train_resume_from_an_export_and_check(tmp_path, capsys):
     # the hiking reference starts from the goals agent's final learner
     learners = tmp_path / "b" / "learners"
     assert (learners / "goals-mixed-v1.msgpack").exists()
-    hiking = Trainer(
+    hiking = small_trainer(
         ["hiking-v1"],
+        tmp_path / "b" / "hiking-v1",
         steps=25,
-        seed=0,
         snapshot_every=20,
         start_steps=20,
-        utd=1,
-        work_dir=tmp_path / "b" / "hiking-v1",
-        policy_dir=policies,
         init_from="goals-mixed-v1",
     )
     assert hiking.run(log_every=10**9)

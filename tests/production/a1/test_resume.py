@@ -8,23 +8,12 @@ import pytest
 pytest.importorskip("jax")
 
 
-def test_exported_checkpoint_resumes_on_a_machine_without_the_buffer(tmp_path):
-    from d5rl.production.a1.experts import Trainer
+def test_exported_checkpoint_resumes_on_a_machine_without_the_buffer(tmp_path, small_trainer):
     from d5rl.production.a1.resume import export
     from d5rl.training.checkpoint import load_checkpoint
 
     def trainer(work):
-        return Trainer(
-            ["speed-0.5", "run-1.25"],
-            steps=90,
-            seed=0,
-            snapshot_every=30,
-            start_steps=30,
-            utd=1,
-            work_dir=work / "speed-0.5+run-1.25",
-            policy_dir=tmp_path / "policies",
-            saved_root=tmp_path / "saved",
-        )
+        return small_trainer(["speed-0.5", "run-1.25"], work / "speed-0.5+run-1.25", saved_root=tmp_path / "saved")
 
     assert not trainer(tmp_path / "machine-a").run(max_minutes=0, log_every=10**9)  # stops at step 30
     export(tmp_path / "machine-a", tmp_path / "saved")
@@ -57,21 +46,11 @@ def test_exported_checkpoint_resumes_on_a_machine_without_the_buffer(tmp_path):
     assert 1000 <= log["train_seconds"] < 1000 + 600
 
 
-def test_training_time_of_a_checkpoint_from_before_it_was_stored_comes_from_the_logs(tmp_path):
-    from d5rl.production.a1.experts import Trainer
+def test_training_time_of_a_checkpoint_from_before_it_was_stored_comes_from_the_logs(tmp_path, small_trainer):
     from d5rl.training.checkpoint import Checkpoint, load_checkpoint, save_checkpoint
 
     def trainer():
-        return Trainer(
-            ["speed-0.5"],
-            steps=60,
-            seed=0,
-            snapshot_every=30,
-            start_steps=30,
-            utd=1,
-            work_dir=tmp_path / "work",
-            policy_dir=tmp_path / "policies",
-        )
+        return small_trainer(["speed-0.5"], tmp_path / "work", steps=60)
 
     assert not trainer().run(max_minutes=0, log_every=10**9)
     ckpt = load_checkpoint(tmp_path / "work")
@@ -83,22 +62,12 @@ def test_training_time_of_a_checkpoint_from_before_it_was_stored_comes_from_the_
     assert json.loads(log_file.read_text())["train_seconds"] >= 500
 
 
-def test_publish_ships_a_data_agents_snapshots_and_a_reference_agents_final_policy(tmp_path):
+def test_publish_ships_a_data_agents_snapshots_and_a_reference_agents_final_policy(tmp_path, small_trainer):
     from d5rl.errors import D5RLError
-    from d5rl.production.a1.experts import Trainer
     from d5rl.production.a1.resume import publish
 
     trained, shipped = tmp_path / "policies", tmp_path / "shipped"
-    t = Trainer(
-        ["speed-0.5", "run-1.25"],
-        steps=60,
-        seed=0,
-        snapshot_every=30,
-        start_steps=30,
-        utd=1,
-        work_dir=tmp_path / "work",
-        policy_dir=trained,
-    )
+    t = small_trainer(["speed-0.5", "run-1.25"], tmp_path / "work", steps=60)
     assert not t.run(max_minutes=0, log_every=10**9)  # stopped at step 30: not finished
     with pytest.raises(D5RLError, match="has not finished"):
         publish(["speed-0.5"], trained, shipped)
