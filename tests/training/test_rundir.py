@@ -10,11 +10,12 @@ from d5rl.training.rundir import RunDir
 
 REPO = Path(__file__).resolve().parents[2]
 PACKAGE = REPO / "d5rl"
-# The names as published run directories (docs/results/**/cells) and older d5rl versions spell them
-NAMES = {
+# The names of a run directory's files as published run directories (docs/results/**/cells) and older d5rl
+# versions spell them, in the order of the RunDir attributes below
+FILE_NAMES = [
     "config.json",
+    "checkpoint",
     "checkpoint.prev",
-    ".checkpoint.tmp-",
     "metrics.jsonl",
     "metrics.csv",
     "eval_progress.json",
@@ -25,34 +26,21 @@ NAMES = {
     "error.txt",
     "log.txt",
     ".worker.json",
-    "bench.json",
-    "eval.csv",
-    "eval.jsonl",
-}  # (and "checkpoint", "done", "videos", "tb": words too common to look for)
+    "done",
+    "videos",
+    "tb",
+]
+# What no module but rundir.py may spell: those names, but words too common to look for, and the names of
+# the temporary checkpoint and of the evaluation logs older versions wrote
+NAMES = {n for n in FILE_NAMES if n not in ("checkpoint", "done", "videos", "tb")}
+NAMES |= {".checkpoint.tmp-", "bench.json", "eval.csv", "eval.jsonl"}
 
 
 def test_the_names_are_those_run_directories_have():
     d = RunDir("/r")
     paths = [d.config, d.checkpoint, d.previous_checkpoint, d.metrics_jsonl, d.metrics_csv, d.eval_progress]
     paths += [d.summary, d.train_lock, d.cell, d.failures, d.error, d.log, d.worker, d.done, d.videos, d.tensorboard]
-    assert [p.name for p in paths] == [
-        "config.json",
-        "checkpoint",
-        "checkpoint.prev",
-        "metrics.jsonl",
-        "metrics.csv",
-        "eval_progress.json",
-        "summary.json",
-        ".train.lock",
-        "cell.json",
-        "failures.jsonl",
-        "error.txt",
-        "log.txt",
-        ".worker.json",
-        "done",
-        "videos",
-        "tb",
-    ]
+    assert [p.name for p in paths] == FILE_NAMES
     assert d.video(1200) == Path("/r/videos/step000001200.mp4") and d.checkpoint_tmp(7).name == ".checkpoint.tmp-7"
     assert rundir.EVAL_FILES == ("eval.csv", "eval.jsonl", "metrics.jsonl", "metrics.csv")
     assert rundir.BENCH_LOG == "bench.json" and rundir.CELL_LOCK == ".lock"
