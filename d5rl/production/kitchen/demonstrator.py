@@ -19,9 +19,9 @@ from collections.abc import Iterator
 
 import numpy as np
 
-from d5rl.envs.kitchen.controller import Controller, rot_z
-from d5rl.envs.kitchen.scripts import OPEN, SCRIPTS, Context, Phase, fixed_target
 from d5rl.envs.kitchen.subtasks import SUBTASK_NAMES
+from d5rl.production.kitchen.controller import Controller, rot_z
+from d5rl.production.kitchen.scripts import OPEN, SCRIPTS, Context, Phase, fixed_target
 
 # --- the policy -----------------------------------------------------------------------------------
 # Between subtasks the arm moves in joint space, straight to an inverse-kinematics solution of the

@@ -67,7 +67,7 @@ def test_demonstrator_opens_the_hinge_after_two_knobs():
 def test_inverse_kinematics_reaches_a_reachable_pose_without_touching_the_simulation():
     import mujoco
 
-    from d5rl.envs.kitchen.controller import Controller
+    from d5rl.production.kitchen.controller import Controller
 
     env = KitchenEnv(obs_mode="state")
     env.reset(seed=0)

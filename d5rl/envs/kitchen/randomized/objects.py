@@ -26,7 +26,7 @@ import dataclasses
 
 import mujoco
 
-from d5rl.envs.kitchen.scripts import KettleGrasp, MicrowaveGrasp
+from d5rl.envs.kitchen.grasps import KettleGrasp, MicrowaveGrasp
 
 NUM_MICROWAVES = 4
 NUM_KETTLES = 8

@@ -10,7 +10,8 @@ from collections.abc import Callable, Iterator
 import numpy as np
 
 from d5rl.envs.kitchen import model as km
-from d5rl.envs.kitchen.controller import R_FORWARD, R_FORWARD_FLAT, orientation_error, rot_y, rot_z
+from d5rl.envs.kitchen.grasps import KettleGrasp, MicrowaveGrasp
+from d5rl.production.kitchen.controller import R_FORWARD, R_FORWARD_FLAT, orientation_error, rot_y, rot_z
 
 OPEN, CLOSE = 1.0, -1.0
 
@@ -42,23 +43,6 @@ class Phase:
     # so the hand keeps its direction (final approaches: clipping bent the path into a 4-6 cm sideways
     # drift that put a finger against the hinged door after the microwave, kettle or bottom burner)
     straight: bool = False
-
-
-@dataclasses.dataclass(frozen=True)
-class MicrowaveGrasp:
-    """How the operator grasps the microwave door's handle, a vertical bar (defaults: the stock one's)."""
-
-    dz: tuple[float, float] = (-0.04, 0.04)  # m, uniform grasp height from the handle site along the bar
-    depth: float = 0.015  # m past the handle's axis
-
-
-@dataclasses.dataclass(frozen=True)
-class KettleGrasp:
-    """How the operator grasps the kettle's handle (a horizontal bar on top, from the front, the fingers
-    closing on it from above and below) and lifts it; the defaults are the stock kettle's."""
-
-    along: float = 0.015  # m, uniform grasp offset along the bar (+-)
-    lift: tuple[float, float] = (0.07, 0.09)  # m, uniform lift height
 
 
 def grasp_plan(ctx: Context, subtask: str, default):
