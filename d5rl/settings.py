@@ -27,6 +27,7 @@ from typing import Any
 
 from d5rl.agents import canonical_name, get_agent
 from d5rl.agents.config import AGENT_BOUNDS, check_bounds
+from d5rl.errors import D5RLError
 from d5rl.registry import get_spec
 from d5rl.training.config import TRAIN_BOUNDS, RunSpec, get_train_config, split_overrides
 
@@ -83,6 +84,11 @@ def resolve(
     _, obs = task_keys(task_id)
     if train_cfg.frame_stack is None:
         train_cfg = train_cfg.replace(frame_stack=3 if obs == "pixels" else 1)
+    elif train_cfg.frame_stack > 1 and obs != "pixels":
+        raise D5RLError(
+            f"frame_stack={train_cfg.frame_stack}: {task_id} observes states, and only camera frames are stacked",
+            "drop --set frame_stack (state tasks take one observation)",
+        )
     agent_cfg = agent_cls.resolve_config(agent_cfg, offline_steps=int(offline_steps), online_steps=int(online_steps))
     return RunSpec(
         agent_cfg.agent_name, task_id, agent_cfg, train_cfg, int(offline_steps), int(online_steps), int(seed)

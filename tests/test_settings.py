@@ -208,3 +208,14 @@ def test_a_run_records_the_resolved_config_that_eval_reads(tmp_path):
 
     with pytest.raises(RunDirError, match="trained by iql v0; this d5rl's is v1"):  # another version's networks
         load_run(tmp_path / "run")
+
+
+def test_frame_stack_on_a_state_task_is_refused_not_ignored(capsys):
+    """Only camera frames are stacked: a state task asked for 3 would train on one state silently."""
+    assert resolve("bc", "kitchen-standard-mixed-v0", ["frame_stack=2"]).train.frame_stack == 2
+    with pytest.raises(d5rl.D5RLError, match="observes states"):
+        resolve("bc", "kitchen-standard-mixed-state-v0", ["frame_stack=3"])
+    assert resolve("bc", "kitchen-standard-mixed-state-v0", ["frame_stack=1"]).train.frame_stack == 1
+    assert main(["train", "bc", "a1-walk-v0", "--set", "frame_stack=3", "--show-config"]) == 2
+    err = capsys.readouterr().err
+    assert err.startswith("error: frame_stack=3: a1-walk-v0 observes states") and "Traceback" not in err
