@@ -9,8 +9,12 @@ row (see :func:`paper_task`), which the report says next to the table.
 
 from __future__ import annotations
 
+import re
+
 from d5rl.errors import D5RLError
 from d5rl.registry import base_task
+
+_VERSION = re.compile(r"-v\d+$")
 
 # {table: {task: {algo: (mean, std or None)}}}
 PAPER: dict[str, dict[str, dict[str, tuple[float, float | None]]]] = {
@@ -181,12 +185,21 @@ PAPER: dict[str, dict[str, dict[str, tuple[float, float | None]]]] = {
 
 def paper_task(task: str) -> str:
     """The paper's row for one of our tasks: a ``-state`` twin maps to its camera task, a task on a
-    dataset variant (the kitchen's imported human data) to the task it re-uses."""
+    dataset variant (the kitchen's imported human data) to the task it re-uses, and a later version of a
+    task to version 0 (the paper's rows carry our version-0 ids; ``a1-walk-v1``, the authors' release's
+    own definition of the paper's A1 walk, compares with the paper's walk row)."""
     try:
         task = base_task(task)
     except D5RLError:  # a task only a custom job knows
         pass
-    return task.replace("-state-v", "-v")
+    task = task.replace("-state-v", "-v")
+    first = _VERSION.sub("-v0", task)
+    return first if any(first in rows for rows in PAPER.values()) else task
+
+
+def same_task(a: str, b: str) -> bool:
+    """Whether two task ids name one task in different versions (``a1-walk-v0``, ``a1-walk-v1``)."""
+    return _VERSION.sub("", a) == _VERSION.sub("", b)
 
 
 def paper_result(task: str, algo: str, phase: str) -> tuple[float, float | None] | None:

@@ -9,7 +9,7 @@ import io
 
 import numpy as np
 
-from d5rl.runner.paper import paper_methods, paper_result, paper_task
+from d5rl.runner.paper import paper_methods, paper_result, paper_task, same_task
 from d5rl.runner.results import (
     CellResult,
     behaviour_table,
@@ -90,6 +90,11 @@ def table_markdown(table: dict, title: str) -> str:
     return "\n".join([f"### {title}", ""] + lines) + "\n"
 
 
+_LATER_VERSION = (
+    " A later version of a task (A1 v1, the authors' release's definition) is compared with the paper's row."
+)
+
+
 def comparison_markdown(table: dict, phase: str, title: str) -> str | None:
     """Our table next to the paper's: each entry "ours / paper" (mean ± std), None if the paper has no row.
 
@@ -110,14 +115,16 @@ def comparison_markdown(table: dict, phase: str, title: str) -> str | None:
     def label(task):
         if not paper_methods(task, phase):
             return f"{task} (not in the paper)"
-        return task if paper_task(task) == task else f"{task} (paper: {paper_task(task)})"
+        return task if same_task(paper_task(task), task) else f"{task} (paper: {paper_task(task)})"
 
     intro = [
         f"### {title} (ours / paper)",
         "",
         "Each entry: this run's mean ± std over seeds / the paper's (500k steps per phase, its own data "
         "and score references; its kitchen and WidowX agents see cameras, so a `-state` task is compared "
-        "with its camera task's row). `-`: not run here (yet), or not in the paper.",
+        "with its camera task's row). `-`: not run here (yet), or not in the paper."
+        + _LATER_VERSION
+        * any(paper_task(t) != t and same_task(paper_task(t), t) for _, t, _ in rows),
         "",
     ]
     return "\n".join(intro + _grid_markdown(algos, rows, cell, label)) + "\n"

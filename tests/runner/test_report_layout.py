@@ -174,3 +174,33 @@ def test_an_entry_with_fewer_seeds_than_the_table_says_how_many(tmp_path):
         run_bc = [truth[("a1-run-v0", "bc", s)][0] for s in (0, 1)]
         assert rows["a1-run-v0"][0].startswith(f"{np.mean(run_bc):.3f} ± {np.std(run_bc):.3f} (n=2)")
         assert "(n=" not in rows["a1-walk-v0"][0] and "(n=" not in rows["a1-run-v0"][1]  # three seeds
+
+
+def test_a_later_version_of_a_task_compares_with_the_papers_row(tmp_path):
+    from d5rl.runner.paper import PAPER, paper_result, paper_task
+
+    assert paper_task("a1-walk-v1") == "a1-walk-v0"  # the release's definition of the paper's walk
+    assert paper_task("a1-hiking-smooth-v1") == "a1-hiking-v0"  # a data variant of a1-hiking-v1
+    assert paper_task("a1-walk-v0") == "a1-walk-v0"
+    assert paper_task("kitchen-standard-mixed-state-v0") == "kitchen-standard-mixed-v0"
+    assert paper_task("toy-reach-v0") == "toy-reach-v0"  # not in the paper: itself
+    assert paper_result("a1-run-v1", "bc", "offline") == PAPER["offline"]["a1-run-v0"]["bc"]
+    assert paper_result("a1-run-v1", "calql", "online") == PAPER["online"]["a1-run-v0"]["calql"]
+
+    def report(tasks):
+        root = tmp_path / "+".join(tasks)
+        for task in tasks:
+            cell = Cell(task, "bc", 0, 100, 0)
+            RunDir(cell.directory(root)).write_cell(cell.to_json())
+            (cell.directory(root) / "metrics.jsonl").write_text(
+                json.dumps({"step": 100, f"eval/{task}/score": 0.5}) + "\n"
+            )
+            (cell.directory(root) / "done").write_text("{}")
+        write_report(root, reps=50, plots=False)
+        return (root / "report" / "table1_offline_vs_paper.md").read_text()
+
+    md = report(["a1-walk-v0", "a1-walk-v1"])
+    assert "| a1-walk-v1 | 0.500 ± 0.000 / 1.006 ± 0.015 |" in md  # no "(paper: a1-walk-v0)": the same task
+    assert "| a1-walk-v0 | 0.500 ± 0.000 / 1.006 ± 0.015 |" in md
+    assert "A later version of a task (A1 v1" in md
+    assert "A later version" not in report(["a1-walk-v0"])
