@@ -1,13 +1,15 @@
 """Reference fingerprints: what every registered dataset's bytes are, so a copy can be checked.
 
 ``references.json`` (next to this module) holds, per dataset (at its default seed), the per-array
-sha256 of its first shard and a digest of every array of every episode in it; for datasets made
-whole in the test suite (the toy family), of the whole dataset. Each entry records the dataset's
+sha256 of its first shard and a digest of every array of every episode in it; of the whole dataset for
+the toy family (generated whole by the test suite) and for the datasets our published results trained
+on where we generated them whole (``WHOLE``). Each entry records the dataset's
 numerics and the machine it was made on: a ``portable`` dataset (:mod:`d5rl.numerics`) has the
 same bytes on every x86-64 CPU, a ``native`` one only on the machine class recorded.
 
     d5rl verify TASK --reference          # "identical to the reference", or the first difference
     python -m d5rl.datasets.references    # regenerate every reference (first shards, in a temp dir)
+    python -m d5rl.datasets.references a1-v1-locomotion --home ~/.cache/d5rl   # from a copy made already
 """
 
 from __future__ import annotations
@@ -31,7 +33,8 @@ from d5rl.files import dump_json
 from d5rl.registry import get_spec, list_tasks
 
 REFERENCES = Path(__file__).with_name("references.json")
-WHOLE = ("toy-reach", "toy-reach-pixels")  # generated whole by the test suite: referenced whole
+TOY = ("toy-reach", "toy-reach-pixels")  # generated whole by the test suite
+WHOLE = TOY  # referenced whole
 DIGEST_HEX = 16  # per-episode digests: 64 bits tell which episode differs, at a quarter of the size
 
 
@@ -193,23 +196,26 @@ def dataset_tasks() -> dict[str, str]:
     return out
 
 
-def record(names: list[str], path: Path = REFERENCES, workers: int = 1) -> None:
-    """Generate each dataset's reference prefix in a temporary ``D5RL_HOME`` and write its entry."""
+def record(names: list[str], path: Path = REFERENCES, workers: int = 1, home: Path | None = None) -> None:
+    """Generate each dataset's reference (its first shard; ``WHOLE`` ones whole) and write its entry: in a
+    temporary ``D5RL_HOME``, or in ``home``, where a copy already made is verified and used as it is."""
     tasks = dataset_tasks()
     unknown = [n for n in names if n not in tasks]
     if unknown:
         raise D5RLError(f"unknown dataset(s) {unknown}", f"known: {', '.join(sorted(tasks))}")
+    if home is not None and not Path(home).is_dir():
+        raise D5RLError(f"--home {home} is not a directory", "name the D5RL_HOME that holds the datasets")
     refs = load_references(path)
     machine = numerics.machine()
     for name in names:
         dspec = dataset_spec(tasks[name])
         whole = name in WHOLE
-        with tempfile.TemporaryDirectory(prefix="d5rl-reference-") as home:
+        with tempfile.TemporaryDirectory(prefix="d5rl-reference-") as tmp:
             old = os.environ.get("D5RL_HOME")
-            os.environ["D5RL_HOME"] = home
+            os.environ["D5RL_HOME"] = str(home or tmp)
             try:
                 t0 = time.perf_counter()
-                root = generate(
+                root = generate(  # a finished copy in ``home`` is verified and kept
                     tasks[name],
                     num_episodes=None if whole else dspec.episodes_per_shard,
                     workers=workers,
@@ -234,13 +240,19 @@ def main(argv: list[str] | None = None) -> int:
 
     ap = argparse.ArgumentParser(
         prog="python -m d5rl.datasets.references",
-        description="regenerate reference fingerprints (first shard; toy family whole)",
+        description="regenerate reference fingerprints (first shard; the datasets in WHOLE whole)",
     )
     ap.add_argument("datasets", nargs="*", help="dataset names (default: every registered dataset)")
     ap.add_argument("--workers", type=int, default=1, help="processes (default 1)")
     ap.add_argument("--out", type=Path, default=REFERENCES, help="the references file to update")
+    ap.add_argument(
+        "--home",
+        type=Path,
+        help="a D5RL_HOME whose finished copies (verified first) are fingerprinted instead of generating "
+        "them again in a temporary one; what is missing there is generated there",
+    )
     args = ap.parse_args(argv)
-    record(args.datasets or sorted(dataset_tasks()), args.out, args.workers)
+    record(args.datasets or sorted(dataset_tasks()), args.out, args.workers, args.home)
     return 0
 
 

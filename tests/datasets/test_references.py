@@ -143,7 +143,7 @@ def test_portable_datasets_regenerate_their_reference_on_other_cpus(name, cpu, t
     # the toy family whole, every other portable dataset's first episode (~100 s each under QEMU)
     env = {**os.environ, "D5RL_HOME": str(tmp_path), "PYTHONPATH": str(REPO)}
     env.update(numerics.portable_env(env))
-    episodes = REFS[name]["num_episodes"] if name in references.WHOLE else 1  # the toy family whole: seconds
+    episodes = REFS[name]["num_episodes"] if name in references.TOY else 1  # the toy family whole: seconds
     root = regenerate(references.dataset_tasks()[name], episodes, env, prefix=(QEMU, "-cpu", cpu))
     result = references.compare(root, REFS[name])
     first = "the first episode of" if episodes == 1 else f"the first {episodes} episodes of"
@@ -172,3 +172,22 @@ def test_native_numerics_fail_the_restricted_instruction_set_comparison(tmp_path
     result = references.compare(native, references.make_entry(portable, None, "this machine"))
     assert not result.identical
     assert "differs from the reference: first in array 'states', episode 0" in result.message
+
+
+def test_a_reference_can_be_made_from_a_copy_already_generated_which_is_verified_first(tmp_path, capsys):
+    home = Path(os.environ["D5RL_HOME"])
+    assert main(["generate", "toy-reach-v0", "--workers", "1"]) == 0
+    root = dataset_root(dataset_spec("toy-reach-v0"))
+    actions = root / "shards" / "shard-00001" / "actions.npy"
+    damaged = bytearray(actions.read_bytes())
+    damaged[-1] ^= 1  # a damaged copy must not become the reference: generate repairs it first
+    actions.write_bytes(bytes(damaged))
+    out = tmp_path / "references.json"
+    assert references.main(["toy-reach", "--home", str(home), "--out", str(out)]) == 0
+    assert "repairing 1 damaged or missing part(s) of toy-reach: shard-00001" in capsys.readouterr().err
+    made = json.loads(out.read_text())["toy-reach"]
+    assert {k: v for k, v in made.items() if k != "machine"} == {
+        k: v for k, v in REFS["toy-reach"].items() if k != "machine"
+    }
+    with pytest.raises(Exception, match="--home .* is not a directory"):
+        references.main(["toy-reach", "--home", str(tmp_path / "nowhere"), "--out", str(out)])
