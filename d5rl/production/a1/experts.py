@@ -11,13 +11,11 @@
 The agents of the ``a1-*-v1`` tasks (:mod:`d5rl.envs.a1.v1`, the release's action range and reward) end
 in ``-v1`` and train the same way::
 
-    python -m d5rl.production.a1.experts train --agents speed-0.5-v1 speed-0.8-v1 speed-1.0-v1 --steps 300000 \
-        --snapshot-every 20000 --first-segment 1250 --single-thread
-    python -m d5rl.production.a1.experts train --agents goals-mixed-v1 goals-smooth-v1 --steps 300000 \
-        --snapshot-every 20000 --first-segment 1250 --single-thread
-    python -m d5rl.production.a1.experts train --agents run-1.25-v1 --steps 300000 --snapshot-every 20000 --single-thread
-    python -m d5rl.production.a1.experts train --agents hiking-v1 --init-from goals-mixed-v1 --steps 100000 \
-        --snapshot-every 20000 --single-thread
+    T="python -m d5rl.production.a1.experts train --snapshot-every 20000 --first-segment 1250 --single-thread"
+    $T --agents speed-0.5-v1 speed-0.8-v1 speed-1.0-v1 --steps 300000
+    $T --agents goals-mixed-v1 goals-smooth-v1 --steps 300000
+    $T --agents run-1.25-v1 --steps 143750
+    $T --agents hiking-v1 --init-from goals-mixed-v1 --steps 100000
 
 (the commands as run, one process per core: ``docs/datacards/a1.md``).
 
