@@ -8,7 +8,9 @@ only numpy and Gymnasium.
 ``envs`` is a list of environments stepped in this process, or one Gymnasium vector env (e.g.
 ``AsyncVectorEnv``: one process each) with at least as many sub-envs as episodes.  Episode ``i`` resets
 with ``seeds[i]``; the ``act`` callable sees the observations of the episodes still running, so a batched
-policy acts on all of them in one call.
+policy acts on all of them in one call.  A policy that acts from the simulator state (a scripted
+demonstrator) ignores the observations, builds itself in ``on_reset`` and ends its episode when its
+script is done by answering :data:`STOP` instead of an action.
 """
 
 from __future__ import annotations
@@ -21,8 +23,17 @@ import gymnasium as gym
 import numpy as np
 
 # act(observations, live, steps) -> actions: ``observations`` of the episodes still running (indices ``live``
-# into the batch), ``steps[i]`` the number of steps episode ``live[i]`` has taken; one action per live episode
+# into the batch), ``steps[i]`` the number of steps episode ``live[i]`` has taken; one action per live episode,
+# or STOP for an episode that ends here
 Act = Callable[[list, np.ndarray, np.ndarray], Any]
+
+
+class _Stop:
+    def __repr__(self) -> str:
+        return "STOP"
+
+
+STOP = _Stop()  # act's answer for an episode that ends before this step, without stepping
 
 
 @dataclass
@@ -69,7 +80,11 @@ def rollout(
 ) -> list[Episode]:
     """Run one episode in each of the first ``len(seeds)`` envs until each terminates or truncates (or has
     taken ``max_steps`` steps: then it counts as truncated).  ``on_reset(i, obs, info)`` is called after
-    episode ``i`` resets, ``on_step(step)`` after each of its steps; both in episode order within a step."""
+    episode ``i`` resets, ``on_step(step)`` after each of its steps; both in episode order within a step.
+
+    ``act`` may answer :data:`STOP` in place of an episode's action: that episode ends there, before the
+    step and without taking it (nothing reaches ``on_step``); it counts as truncated (it was cut short, not
+    terminal), its length is the steps it took and its ``info`` its last step's (``{}`` if it took none)."""
     n = len(seeds)
     batch = _Vector(envs, n) if isinstance(envs, gym.vector.VectorEnv) else _Envs(envs, n)
     obs, infos = batch.reset(list(seeds))
@@ -82,6 +97,13 @@ def rollout(
     while not done.all():
         live = np.flatnonzero(~done)
         actions = act([obs[i] for i in live], live, steps[live])
+        stop = np.array([a is STOP for a in actions], bool)
+        if stop.any():
+            for i in live[stop]:
+                episodes[i].truncated = done[i] = True
+            live, actions = live[~stop], [a for a, s in zip(actions, stop) if not s]
+            if not len(live):
+                continue
         for i, (next_obs, reward, term, trunc, info), action in zip(live, batch.step(live, actions), actions):
             ep = episodes[i]
             ep.ret += float(reward)
@@ -89,8 +111,7 @@ def rollout(
             ep.success |= bool(info.get("success", False))
             trunc = bool(trunc) or (max_steps is not None and ep.length >= max_steps and not term)
             ep.terminated, ep.truncated, done[i] = bool(term), trunc, bool(term) or trunc
-            if done[i]:
-                ep.info = info
+            ep.info = info
             if on_step is not None:
                 on_step(Step(int(i), int(steps[i]), obs[i], action, reward, bool(term), trunc, info, next_obs))
             obs[i] = next_obs

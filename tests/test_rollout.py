@@ -4,7 +4,7 @@ import gymnasium as gym
 import numpy as np
 import pytest
 
-from d5rl.rollout import rollout
+from d5rl.rollout import STOP, rollout
 
 
 class Countdown(gym.Env):
@@ -77,3 +77,27 @@ def test_max_steps_truncates_and_fewer_envs_than_episodes_is_refused():
     assert (ep.length, ep.terminated, ep.truncated, ep.ret) == (2, False, True, 1.0 + 2.0)
     with pytest.raises(ValueError, match="2 episodes need 2 envs"):
         rollout([Countdown()], act_from_obs, [0, 1])
+
+
+@pytest.mark.parametrize("vector", [False, True])
+def test_act_can_end_an_episode_before_stepping(vector):
+    """A scripted policy's STOP ends its episode without a step; the other episodes run on as before."""
+    seeds = [4, 1, 6]  # natural lengths 3, 4, 5; episode 1 stops before its step 2, episode 2 before its step 0
+    stop_at = {1: 2, 2: 0}
+    envs = gym.vector.SyncVectorEnv([Countdown] * 3) if vector else [Countdown() for _ in range(3)]
+    steps = []
+
+    def act(observations, live, t):
+        actions = act_from_obs(observations, live, t)
+        return [STOP if stop_at.get(int(i)) == int(k) else a for i, k, a in zip(live, t, actions)]
+
+    episodes = rollout(envs, act, seeds, on_step=steps.append)
+    lengths = [(ep.length, ep.terminated, ep.truncated) for ep in episodes]
+    assert lengths == [(3, True, False), (2, False, True), (0, False, True)]
+    ret4, _, _ = expected(4, lambda s, t: np.float32(s + 0.5 * t))
+    assert episodes[0].ret == pytest.approx(ret4, rel=1e-6)
+    assert episodes[1].ret == pytest.approx(1.0 * 1 + 1.5 * 2, rel=1e-6)  # actions 1, 1.5 at steps 1, 2
+    assert episodes[1].info["score"] == 1 * 10 + 2 and episodes[1].success  # its last step's info
+    assert (episodes[2].ret, episodes[2].info, episodes[2].success) == (0.0, {}, False)
+    assert sorted((s.episode, s.t) for s in steps) == [(0, 0), (0, 1), (0, 2), (1, 0), (1, 1)]
+    assert not any(s.done for s in steps if s.episode == 1)  # the stop is not a step: no transition ends it

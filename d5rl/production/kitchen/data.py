@@ -18,7 +18,7 @@ the episode's own four subtasks; each task relabels them with :func:`relabel`.
 from __future__ import annotations
 
 import functools
-from collections.abc import Sequence
+from collections.abc import Callable, Sequence
 
 import numpy as np
 
@@ -27,6 +27,7 @@ from d5rl.datasets.render_cache import check_render_args, observation_cache
 from d5rl.envs.kitchen.subtasks import PARTIAL, SUBTASK_NAMES
 from d5rl.envs.kitchen.task import CAMERAS, KitchenEnv
 from d5rl.production.kitchen.demonstrator import Demonstrator
+from d5rl.rollout import STOP, Step, rollout
 
 COMBINATIONS: tuple[tuple[str, str, str, str], ...] = (
     ("microwave", "kettle", "light switch", "slide cabinet"),
@@ -118,11 +119,11 @@ class KitchenStandardGenerator:
         return self.demonstrate(COMBINATIONS[combo_index], rng, meta={"combination": combo_index})
 
     def demonstrate(self, subtasks: Sequence[str], rng: np.random.Generator, meta: dict | None = None) -> Episode:
-        env = self.env
         cols = np.array([SUBTASK_NAMES.index(s) for s in subtasks])
-        env.reset(seed=int(rng.integers(2**31)))
-        policy = Demonstrator(env, subtasks, rng)
-        arrays = record_episode(env, policy, self.max_steps, cols)
+        seed = int(rng.integers(2**31))
+        arrays, policy = record_episode(
+            self.env, seed, lambda: Demonstrator(self.env, subtasks, rng), self.max_steps, cols
+        )
         solved = arrays["infos/completed"][:, cols].any(axis=0)
         info = {
             "subtasks": list(subtasks),
@@ -133,23 +134,42 @@ class KitchenStandardGenerator:
         return Episode(arrays, {**(meta or {}), **info})
 
 
-def record_episode(env, policy, max_steps: int, cols, when_finished=None) -> dict[str, np.ndarray]:
-    """Step ``env`` with the demonstrator ``policy`` for at most ``max_steps`` and return the episode's
-    arrays (:func:`episode_arrays`). When the script is finished the episode ends, unless
-    ``when_finished(action)`` is given: it returns the action to keep stepping with."""
-    states, proprio, actions, completed = [env.get_state()], [env.data.qpos[:9].astype(np.float32)], [], []
-    for _ in range(max_steps):
+def record_episode(
+    env, seed: int, demonstrator: Callable[[], Demonstrator], max_steps: int, cols, when_finished=None
+) -> tuple[dict[str, np.ndarray], Demonstrator]:
+    """One scripted episode through :func:`d5rl.rollout.rollout`: reset ``env`` with ``seed``, make the
+    demonstrator (``demonstrator()``, after the reset: it reads the scene) and let it act from the
+    simulator state for at most ``max_steps`` steps.  Returns the episode's arrays
+    (:func:`episode_arrays`) and the demonstrator.  When the demonstrator's ``act`` finishes the script the
+    episode ends there, without stepping that action (:data:`d5rl.rollout.STOP`), unless
+    ``when_finished(policy, action)`` is given: it returns the action to keep stepping with."""
+    states, proprio, actions, completed = [], [], [], []
+    policy = None
+
+    def record() -> None:
+        states.append(env.get_state())
+        proprio.append(env.data.qpos[:9].astype(np.float32))
+
+    def on_reset(i, obs, info) -> None:
+        nonlocal policy
+        policy = demonstrator()
+        record()
+
+    def act(observations, live, steps) -> list:
         action = policy.act()
         if policy.finished:
             if when_finished is None:
-                break
-            action = when_finished(action)
-        env.step(action)
-        actions.append(action)
-        states.append(env.get_state())
-        proprio.append(env.data.qpos[:9].astype(np.float32))
+                return [STOP]
+            action = when_finished(policy, action)
+        return [action]
+
+    def on_step(step: Step) -> None:
+        actions.append(step.action)
+        record()
         completed.append(env.completed())
-    return episode_arrays(states, proprio, actions, completed, cols)
+
+    rollout([env], act, [seed], max_steps=max_steps, on_reset=on_reset, on_step=on_step)
+    return episode_arrays(states, proprio, actions, completed, cols), policy
 
 
 def episode_arrays(states, proprio, actions, completed, cols) -> dict[str, np.ndarray]:

@@ -27,6 +27,8 @@ from d5rl.production.kitchen.data import COMBINATIONS
 from d5rl.production.kitchen.demonstrator import Demonstrator
 from d5rl.production.kitchen.human import completion_order
 from d5rl.registry import get_spec
+from d5rl.rollout import STOP, rollout
+from d5rl.rollout import Episode as RolloutEpisode
 
 PAPER = {"episodes": 563, "transitions": 128_569, "mean_return": 261.12, "objects": 3.98, "combinations": 22}
 
@@ -144,22 +146,31 @@ def print_comparison(scripted: dict, human: dict | None) -> None:
         print(f"| {name} | {col(scripted, f)} | {col(human, f)} |")
 
 
+def demonstrator_episode(env: KitchenEnv, subtasks, seed: int, max_steps: int = 280) -> RolloutEpisode:
+    """The demonstrator doing ``subtasks`` in ``env`` (its episode from ``seed``) through the rollout loop,
+    until the step that finishes its script (that step is taken) or ``max_steps``."""
+    rng = np.random.default_rng(seed)
+    made = []  # the demonstrator, made after the reset: it reads the scene
+
+    def act(observations, live, steps):
+        policy = made[0]
+        return [STOP if policy.finished else policy.act()]
+
+    (episode,) = rollout(
+        [env],
+        act,
+        [int(rng.integers(2**31))],
+        max_steps=max_steps,
+        on_reset=lambda *_: made.append(Demonstrator(env, subtasks, rng)),
+    )
+    return episode
+
+
 def demonstrator_rates(subtask_seeds: int, combo_seeds: int) -> dict:
     def run(seq, seeds):
         env = KitchenEnv(obs_mode="state", tasks=tuple(seq))
-        solved, lengths = [], []
-        for seed in seeds:
-            rng = np.random.default_rng(seed)
-            env.reset(seed=int(rng.integers(2**31)))
-            policy = Demonstrator(env, seq, rng)
-            t = 0
-            for t in range(280):
-                _, _, _, _, info = env.step(policy.act())
-                if policy.finished:
-                    break
-            solved.append(info["solved"].copy())
-            lengths.append(t + 1)
-        return np.array(solved), np.array(lengths)
+        episodes = [demonstrator_episode(env, seq, seed) for seed in seeds]
+        return np.array([e.info["solved"].copy() for e in episodes]), np.array([e.length for e in episodes])
 
     single = {}
     for s in SUBTASK_NAMES:

@@ -8,6 +8,7 @@ import numpy as np
 from d5rl.datasets.dataset import Dataset
 from d5rl.datasets.episode import Episode
 from d5rl.envs.toy.task import GOAL, HORIZON, ToyReachEnv
+from d5rl.rollout import Step, rollout
 
 
 def expert_action(pos: np.ndarray) -> np.ndarray:
@@ -17,17 +18,28 @@ def expert_action(pos: np.ndarray) -> np.ndarray:
 def toy_episode(rng: np.random.Generator, expert_prob: float, noise: float, pixels: bool = False) -> Episode:
     """One episode from a policy that acts like the expert w.p. ``expert_prob`` per step, else randomly."""
     env = ToyReachEnv(pixels=pixels)
-    obs, _ = env.reset(seed=int(rng.integers(2**31)))
-    obs_list, acts, rews = [obs], [], []
-    for _ in range(HORIZON):
+    obs_list, acts, rews = [], [], []
+
+    def act(observations, live, steps) -> list:
         if rng.random() < expert_prob:
             a = np.clip(expert_action(env.pos) + noise * rng.standard_normal(2), -1, 1)
         else:
             a = rng.uniform(-1, 1, 2)
-        obs, r, term, trunc, _ = env.step(a.astype(np.float32))
-        obs_list.append(obs)
-        acts.append(a)
-        rews.append(r)
+        return [a.astype(np.float32)]
+
+    def on_step(step: Step) -> None:
+        obs_list.append(step.next_obs)
+        acts.append(step.action)
+        rews.append(step.reward)
+
+    rollout(
+        [env],
+        act,
+        [int(rng.integers(2**31))],
+        max_steps=HORIZON,
+        on_reset=lambda i, obs, info: obs_list.append(obs),
+        on_step=on_step,
+    )
     arrays = {
         "actions": np.asarray(acts, np.float32),
         "rewards": np.asarray(rews, np.float32),

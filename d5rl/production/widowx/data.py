@@ -33,7 +33,7 @@ through :mod:`d5rl.datasets.render_cache` when the dataset is loaded.
 
 from __future__ import annotations
 
-from typing import Any
+import dataclasses
 
 import numpy as np
 
@@ -44,8 +44,20 @@ from d5rl.envs.widowx import scene as wscene
 from d5rl.envs.widowx.registration import MAX_EPISODE_STEPS
 from d5rl.envs.widowx.task import LIFTED_Z, WidowXSortingEnv
 from d5rl.production.widowx import scripted
+from d5rl.rollout import Step, rollout
 
 PICKPLACE_STEPS = 60
+
+
+@dataclasses.dataclass(frozen=True)
+class Plan:
+    """What the scripted policy sets out to do in one episode (see the module docstring)."""
+
+    kind: str  # sorting: "both", "one" or "miss"; "pickplace" for the pickplace data
+    objects: list[str]  # in the order the policy handles them (the ones it attempts)
+    missed: list[bool]  # the grasp of this object is botched on purpose
+    wrong: list[bool]  # this object goes to the wrong bin
+    targets: list[str]  # the bin each object goes to
 
 
 class WidowXScriptedGenerator:
@@ -87,10 +99,9 @@ class WidowXScriptedGenerator:
             self._env = WidowXSortingEnv(obs_mode="state")
         return self._env
 
-    def episode(self, index: int, rng: np.random.Generator) -> Episode:
-        env = self.env
-        env.reset(seed=int(rng.integers(2**31 - 1)))
-        objects = list(env.domain.objects)
+    def draw_plan(self, rng: np.random.Generator) -> Plan:
+        """The episode's plan in the scene just reset (its objects)."""
+        objects = list(self.env.domain.objects)
         rng.shuffle(objects)
         plan = "pickplace"
         if self.mode == "sorting":
@@ -103,8 +114,10 @@ class WidowXScriptedGenerator:
             missed[int(rng.integers(len(objects)))] = True
         wrong = [bool(rng.random() < self.p_wrong) for _ in objects]
         targets = [_other(wm.CATEGORY[o]) if w else wm.CATEGORY[o] for o, w in zip(objects, wrong)]
-        policy = scripted.ScriptedSorter(env, objects, targets, rng, noise=self.noise, miss=missed)
+        return Plan(plan, objects, missed, wrong, targets)
 
+    def episode(self, index: int, rng: np.random.Generator) -> Episode:
+        env = self.env
         T = self.episode_steps
         proprio = np.empty((T + 1, 8), np.float32)
         states = np.empty((T + 1, env.state_size), np.float64)
@@ -112,32 +125,51 @@ class WidowXScriptedGenerator:
         rewards = np.empty(T, np.float32)
         stage = np.empty(T + 1, np.int8)
         current = np.empty(T + 1, np.int8)
-        proprio[0], states[0] = env.proprio(), env.get_state()
-        stage[0], current[0] = policy.stage, policy.current
         first_reward_step: dict[int, int] = {}
-        lifted = [False] * len(objects)  # did the object leave the table in the policy's grasp?
         done_step = None
-        info: dict[str, Any] = {}
-        for t in range(T):
-            actions[t] = policy.act()
-            _, rewards[t], _, _, info = env.step(actions[t])
-            proprio[t + 1], states[t + 1] = env.proprio(), env.get_state()
-            stage[t + 1], current[t + 1] = policy.stage, policy.current
-            if policy.stage_name in ("lift", "carry", "release") and policy.current < len(objects):
-                name = objects[policy.current]
+        plan, policy, lifted = None, None, []
+
+        def record(t: int) -> None:
+            proprio[t], states[t] = env.proprio(), env.get_state()
+            stage[t], current[t] = policy.stage, policy.current
+
+        def on_reset(i, obs, info) -> None:  # the plan and the policy need the scene
+            nonlocal plan, policy, lifted
+            plan = self.draw_plan(rng)
+            policy = scripted.ScriptedSorter(env, plan.objects, plan.targets, rng, noise=self.noise, miss=plan.missed)
+            lifted = [False] * len(plan.objects)  # did the object leave the table in the policy's grasp?
+            record(0)
+
+        def on_step(step: Step) -> None:
+            nonlocal done_step
+            t = step.t
+            actions[t], rewards[t] = step.action, step.reward
+            record(t + 1)
+            if policy.stage_name in ("lift", "carry", "release") and policy.current < len(plan.objects):
+                name = plan.objects[policy.current]
                 lifted[policy.current] |= bool(wscene.object_center(env.model, env.data, name)[2] > LIFTED_Z)
             first_reward_step.setdefault(int(rewards[t]), t)
             if done_step is None and policy.stage_name == "done":
                 done_step = t
+
+        (ep,) = rollout(
+            [env],
+            lambda observations, live, steps: [np.asarray(policy.act(), np.float32)],  # from the simulator state
+            [int(rng.integers(2**31 - 1))],
+            max_steps=T,
+            on_reset=on_reset,
+            on_step=on_step,
+        )
+        info, objects, targets = ep.info, plan.objects, plan.targets
         final_bins = {env.domain.shoe: info["shoe_bin"], env.domain.toy: info["toy_bin"]}
         meta = {
             "domain": env.domain.to_json(),
             "mode": self.mode,
-            "plan": plan,  # sorting: "both", "one" or "miss"; "pickplace" for the pickplace data
+            "plan": plan.kind,  # sorting: "both", "one" or "miss"; "pickplace" for the pickplace data
             "objects": objects,  # in the order the policy handles them (the ones it attempts)
-            "missed_grasp": missed,  # the grasp of this object was botched on purpose
+            "missed_grasp": plan.missed,  # the grasp of this object was botched on purpose
             "target_bins": targets,
-            "wrong_bin": wrong,
+            "wrong_bin": plan.wrong,
             "final_bins": [final_bins[o] for o in objects],
             "end_bins": {"shoe": info["shoe_bin"], "toy": info["toy_bin"]},  # where the shoe / toy lie at the end
             "placed_as_intended": [final_bins[o] == b for o, b in zip(objects, targets)],

@@ -97,26 +97,29 @@ class RandomizedKitchenGenerator:
 
     def demonstrate(self, subtasks: Sequence[str], op: Operator, rng: np.random.Generator) -> Episode:
         env = self.env
-        _, info0 = env.reset(seed=int(rng.integers(2**31)))
-        attempted = [s for s in subtasks if rng.random() >= op.give_up]
-        # an abandoned subtask is still approached for a while (a failed attempt), then dropped
-        policy = Demonstrator(env, attempted, rng, style=op.style(rng), transit_first=True, retries=op.retries)
         cols = np.array([SUBTASK_NAMES.index(s) for s in subtasks])
+        seed = int(rng.integers(2**31))
+
+        def demonstrator():  # after the reset: the operator's choices in this episode's domain
+            attempted = [s for s in subtasks if rng.random() >= op.give_up]
+            # an abandoned subtask is still approached for a while (a failed attempt), then dropped
+            return Demonstrator(env, attempted, rng, style=op.style(rng), transit_first=True, retries=op.retries)
+
         hold_noise = np.zeros(9)
 
-        def hold(action):  # after the script: hold still with the operator's slowly varying noise
+        def hold(policy, action):  # after the script: hold still with the operator's slowly varying noise
             nonlocal hold_noise
             hold_noise = 0.8 * hold_noise + 0.2 * rng.normal(0.0, policy.style.noise, 9)
             return np.clip(action + hold_noise, -1, 1).astype(np.float32)
 
-        arrays = record_episode(env, policy, self.max_steps, cols, when_finished=hold)
+        arrays, policy = record_episode(env, seed, demonstrator, self.max_steps, cols, when_finished=hold)
         solved_any = arrays["infos/completed"].any(axis=0)
         meta = {
-            "domain": info0["domain"],
+            "domain": env.domain.to_json(),  # the reset's info["domain"]
             "operator": op.name,
             "style": dataclasses.asdict(policy.style),
             "subtasks": list(subtasks),
-            "attempted": attempted,
+            "attempted": policy.subtasks,
             "solved": [s for s in SUBTASK_NAMES if solved_any[SUBTASK_NAMES.index(s)]],
             "num_solved": int(solved_any.sum()),
         }
