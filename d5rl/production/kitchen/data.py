@@ -17,6 +17,7 @@ the episode's own four subtasks; each task relabels them with :func:`relabel`.
 
 from __future__ import annotations
 
+import dataclasses
 import functools
 from collections.abc import Callable, Sequence
 
@@ -26,7 +27,7 @@ from d5rl.datasets.episode import Episode
 from d5rl.datasets.render_cache import check_render_args, observation_cache
 from d5rl.envs.kitchen.subtasks import PARTIAL, SUBTASK_NAMES
 from d5rl.envs.kitchen.task import CAMERAS, KitchenEnv
-from d5rl.production.kitchen.demonstrator import Demonstrator
+from d5rl.production.kitchen.demonstrator import Demonstrator, Style
 from d5rl.rollout import STOP, Step, rollout
 
 COMBINATIONS: tuple[tuple[str, str, str, str], ...] = (
@@ -103,10 +104,20 @@ class KitchenStandardGenerator:
     version = "kitchen-standard-demos-6"  # what each version changed: CHANGELOG.md
     name = "d5rl.envs.kitchen.data:KitchenStandardGenerator"  # in the manifests (the code's first home)
 
-    def __init__(self, task_id: str | None = None, max_steps: int = MAX_STEPS, habit: float | None = None):
-        # None: combination ``index mod 22`` (the dataset); a probability: the combinations of an operator
-        # with that habit (habit_schedule), for docs/experiments/kitchen-learnability
+    def __init__(
+        self,
+        task_id: str | None = None,
+        max_steps: int = MAX_STEPS,
+        habit: float | None = None,
+        slips: float = 0.0,
+        noise_scale: float = 1.0,
+    ):
+        # for docs/experiments/kitchen-learnability (the dataset: the defaults): habit None is combination
+        # ``index mod 22``, a probability the combinations of an operator with that habit (habit_schedule);
+        # slips: Demonstrator(slips=...); noise_scale multiplies each episode's Style.noise
         self.habit = habit
+        self.slips = float(slips)
+        self.noise_scale = float(noise_scale)
 
         self.env = KitchenEnv(obs_mode="state", tasks=COMBINATIONS[0])
         self.max_steps = int(max_steps)
@@ -122,7 +133,11 @@ class KitchenStandardGenerator:
         cols = np.array([SUBTASK_NAMES.index(s) for s in subtasks])
         seed = int(rng.integers(2**31))
         arrays, policy = record_episode(
-            self.env, seed, lambda: Demonstrator(self.env, subtasks, rng), self.max_steps, cols
+            self.env,
+            seed,
+            lambda: Demonstrator(self.env, subtasks, rng, style=self._style(rng), slips=self.slips),
+            self.max_steps,
+            cols,
         )
         solved = arrays["infos/completed"][:, cols].any(axis=0)
         info = {
@@ -132,6 +147,10 @@ class KitchenStandardGenerator:
             "style": dict(vars(policy.style)) if hasattr(policy.style, "__dict__") else {},
         }
         return Episode(arrays, {**(meta or {}), **info})
+
+    def _style(self, rng: np.random.Generator) -> Style:
+        style = Style.sample(rng)  # the draws the Demonstrator makes itself without a style: the same bytes
+        return style if self.noise_scale == 1.0 else dataclasses.replace(style, noise=style.noise * self.noise_scale)
 
 
 def record_episode(

@@ -46,6 +46,13 @@ TRANSIT_JITTER = 0.015  # m, std of the offset of the transit's end from the tar
 # by each of IK_SEEDS (fixed, drawn once) and the best kept (cost: m, plus 0.1 per rad of rotation).
 IK_MISS = 0.05
 IK_SEEDS = np.random.default_rng(0).normal(0.0, 0.4, (11, 7))
+# Slips (Demonstrator(slips=p), for docs/experiments/kitchen-learnability; the datasets have none): with
+# probability p per step of an approach or a transit the arm is pushed off its course for a few steps (a
+# random joint velocity held through the slip) and the controller then brings it back, so the data show
+# corrections from states the clean script never visits.
+SLIP_STEPS = (2, 6)  # a slip lasts 2 to 5 steps
+SLIP_SCALE = 0.15  # std of its normalized joint velocity, per arm joint
+SLIP_PHASES = ("pre-grasp", "pre-push", "transit", "retreat")  # not the final, precise reach
 
 
 @dataclasses.dataclass(frozen=True)
@@ -86,6 +93,7 @@ class Demonstrator:
         style: Style | None = None,
         transit_first: bool = False,
         retries: int = 0,
+        slips: float = 0.0,
     ):
         self.env = env
         # tries again (up to ``retries`` times, after the remaining subtasks) at a subtask whose object
@@ -96,6 +104,7 @@ class Demonstrator:
         # kettle site is out of the resolved-rate reach from the rest pose); the standard kitchen's
         # data keeps its first moves
         self.transit_first = transit_first
+        self.slips = float(slips)  # chance per step of a slip (SLIP_PHASES)
         self.subtasks = list(subtasks)
         self.rng = rng
         self.style = style or Style.sample(rng)
@@ -108,6 +117,9 @@ class Demonstrator:
         self._flip = False
         self._steps = 0
         self._pause = 0
+        self._slip = 0  # steps left of the current slip
+        self._slip_push = np.zeros(7)
+        self.slipping = False  # whether the last action was a slip's
         self.current_subtask: str | None = None
         self.finished = False
         self.log: list[tuple] = []  # (subtask, phase, steps, final position error) of finished phases
@@ -226,6 +238,17 @@ class Demonstrator:
             hold[7:] = OPEN
             return hold
         ph = self._phase
+        self.slipping = False
+        if self._slip == 0 and self.slips > 0 and ph.name in SLIP_PHASES and self.rng.random() < self.slips:
+            self._slip = int(self.rng.integers(*SLIP_STEPS))
+            self._slip_push = self.rng.normal(0.0, SLIP_SCALE, 7)
+            self._steps = max(0, self._steps - self._slip)  # as many steps again to get back on course
+        if self._slip > 0:  # off course; the phase's clock stops until the slip is over
+            self._slip -= 1
+            self.slipping = True
+            act = np.zeros(9)
+            act[:7], act[7:] = self._slip_push, ph.grip
+            return np.clip(act, -1.0, 1.0).astype(np.float32)
         self.ctx.phase_step = self._steps
         pos, rot = self._target()
         # stuck (a wrist joint at its limit)? try once with the hand turned the other way round

@@ -1,6 +1,6 @@
-"""Why do BC and IQL from state fail on the scripted standard-kitchen data? Five experiments.
+"""Why do BC and IQL from state fail on the scripted standard-kitchen data? Seven experiments.
 
-    python docs/experiments/kitchen-learnability/learnability.py            # E1 to E5
+    python docs/experiments/kitchen-learnability/learnability.py            # E1 to E7
     python docs/experiments/kitchen-learnability/learnability.py --only e3  # one of them
 
 on the registered ``kitchen-standard`` dataset (generated on first use; ``d5rl generate
@@ -19,6 +19,10 @@ E3  Action fit on held-out episodes (every 10th), split by the demonstrator's ph
 E4  BC with batches drawn as if the orders followed an operator's habit (``order_probabilities``).
 E5  BC on data generated with that habit (``KitchenStandardGenerator(habit=...)``, a task registered
     here), next to BC on as many episodes of the dataset.
+E6  BC on data whose demonstrator slips off course now and then and corrects
+    (``KitchenStandardGenerator(slips=...)``): do corrections keep BC on the data's states?
+E7  BC on one order of subtasks (habit 1) with the demonstrator's action noise scaled: is the spread of
+    states what BC lacks to chain subtasks?
 """
 
 from __future__ import annotations
@@ -217,25 +221,29 @@ def e4(ds, obs, act, habits, seeds, steps, episodes) -> None:
         )
 
 
-def habit_task(habit: float) -> str:
-    """A state task like the mixed one on data whose combinations follow an operator with ``habit``
-    (``KitchenStandardGenerator(habit=...)``; its own dataset directory, portable numerics)."""
+def variant_task(tag: str, description: str, **generator_kwargs) -> str:
+    """A state task like the mixed one on data of the standard kitchen's generator with other arguments
+    (``KitchenStandardGenerator(**generator_kwargs)``; its own dataset directory, portable numerics)."""
     import dataclasses
 
     from d5rl.registry import get_spec, register
 
     base = get_spec(TASK)
-    tag = f"habit{round(100 * habit)}"
     dspec = dataclasses.replace(
         base.dataset,
         name=f"kitchen-standard-{tag}",
-        generator_kwargs={"habit": habit},
+        generator_kwargs=generator_kwargs,
         numerics="portable",
-        description=f"kitchen-standard's demonstrator, combinations by a habit of {habit}",
+        description=f"kitchen-standard's demonstrator, {description}",
     )
     tid = f"kitchen-standard-mixed-state-{tag}-v0"
     register(dataclasses.replace(base, id=tid, dataset=dspec, dataset_variants={}))
     return tid
+
+
+def habit_task(habit: float) -> str:
+    """Data whose combinations follow an operator with ``habit`` (``KitchenStandardGenerator(habit=...)``)."""
+    return variant_task(f"habit{round(100 * habit)}", f"combinations by a habit of {habit}", habit=habit)
 
 
 def e5(ds, obs, act, habits, seeds, steps, episodes, data_episodes) -> None:
@@ -270,21 +278,91 @@ def e5(ds, obs, act, habits, seeds, steps, episodes, data_episodes) -> None:
         print(f"| {what} | {common} | {per_seed} | {np.mean(scores):.3f} | {_subtask_cols(stats)} |", flush=True)
 
 
+def e6(slips, seeds, steps, episodes, data_episodes) -> None:
+    """BC on data whose demonstrator slips off course and corrects (``Demonstrator(slips=p)``), the first
+    ``data_episodes`` episodes; E5's first row is the dataset's own at the same size."""
+    from d5rl.datasets.loading import load_dataset
+    from d5rl.training.evaluation import evaluate
+
+    n = data_episodes or 160
+    print(f"\nE6: BC {steps} steps on the first {n} episodes of data with slips; {episodes} episodes")
+    print(
+        "| slips per step | slip steps | objects per episode | score per seed | mean | subtasks done (mw / kettle / bb / tb / light / slide / hinge) |"
+    )
+    print("|---|---:|---:|---|---:|---|")
+    for p in slips:
+        task = variant_task(f"slips{round(1000 * p)}", f"slips with probability {p} per step", slips=p)
+        hd = load_dataset(task, episodes=n, workers=1, progress=False)
+        x, y = np.asarray(hd.observations, np.float32), np.asarray(hd.arrays["actions"], np.float32)
+        solved = np.mean([m["num_solved"] for m in hd.episode_meta])
+        # slip steps: the arm's action held constant over consecutive steps outside the controller's law
+        held = np.all(np.abs(np.diff(y[:, :7], axis=0)) < 1e-7, axis=1).mean()
+        scores, stats = [], {}
+        for seed in seeds:
+            r = evaluate(train_bc(x, y, seed, steps), TASK, episodes, seed=seed, num_envs=5)
+            scores.append(r["score"])
+            for k, v in r.get("stats", {}).items():
+                stats[k] = stats.get(k, 0.0) + v / len(seeds)
+        per_seed = ", ".join(f"{s:.3f}" for s in scores)
+        print(
+            f"| {p} | {held:.1%} | {solved:.2f} | {per_seed} | {np.mean(scores):.3f} | {_subtask_cols(stats)} |",
+            flush=True,
+        )
+
+
+def e7(noise_scales, seeds, steps, episodes, data_episodes) -> None:
+    """BC on one order of subtasks (an operator with habit 1: microwave, kettle, bottom burner, top burner)
+    with the demonstrator's action noise scaled: does a wider spread of states teach BC to chain subtasks?"""
+    from d5rl.datasets.loading import load_dataset
+    from d5rl.training.evaluation import evaluate
+
+    n = data_episodes or 160
+    print(f"\nE7: BC {steps} steps on the first {n} episodes of one order, action noise scaled; {episodes} episodes")
+    print(
+        "| noise scale | action noise std | objects per episode | score per seed | mean | subtasks done (mw / kettle / bb / tb / light / slide / hinge) |"
+    )
+    print("|---|---:|---:|---|---:|---|")
+    for scale in noise_scales:
+        kwargs = {"habit": 1.0} if scale == 1.0 else {"habit": 1.0, "noise_scale": scale}
+        tag = "habit100" if scale == 1.0 else f"habit100-noise{round(10 * scale)}"
+        task = variant_task(tag, f"one order, action noise x{scale}", **kwargs)
+        hd = load_dataset(task, episodes=n, workers=1, progress=False)
+        x, y = np.asarray(hd.observations, np.float32), np.asarray(hd.arrays["actions"], np.float32)
+        solved = np.mean([m["num_solved"] for m in hd.episode_meta])
+        noise = np.mean([m["style"]["noise"] for m in hd.episode_meta])
+        scores, stats = [], {}
+        for seed in seeds:
+            r = evaluate(train_bc(x, y, seed, steps), TASK, episodes, seed=seed, num_envs=5)
+            scores.append(r["score"])
+            for k, v in r.get("stats", {}).items():
+                stats[k] = stats.get(k, 0.0) + v / len(seeds)
+        per_seed = ", ".join(f"{s:.3f}" for s in scores)
+        print(
+            f"| {scale} | {noise:.3f} | {solved:.2f} | {per_seed} | {np.mean(scores):.3f} | {_subtask_cols(stats)} |",
+            flush=True,
+        )
+
+
 def main(argv=None) -> None:
     ap = argparse.ArgumentParser(description=__doc__, formatter_class=argparse.RawDescriptionHelpFormatter)
     ap.add_argument(
-        "--only", choices=("e1", "e2", "e3", "e4", "e5"), action="append", help="run only these (repeatable)"
+        "--only",
+        choices=("e1", "e2", "e3", "e4", "e5", "e6", "e7"),
+        action="append",
+        help="run only these (repeatable)",
     )
     ap.add_argument("--seeds", type=int, nargs="+", default=[0, 1])
     ap.add_argument("--steps", type=int, default=10_000, help="BC gradient steps (the state Table 1 budget)")
     ap.add_argument("--episodes", type=int, default=20, help="evaluation episodes per policy")
     ap.add_argument("--data-episodes", type=int, default=None, help="use the dataset's first N (E5: default 160)")
     ap.add_argument("--habit", type=float, nargs="+", default=[0.8, 0.9], help="E4: the habit's probabilities")
+    ap.add_argument("--slips", type=float, nargs="+", default=[0.03], help="E6: slips per step")
+    ap.add_argument("--noise-scale", type=float, nargs="+", default=[1.0, 4.0], help="E7: action noise scales")
     ap.add_argument("--k", type=int, nargs="+", default=[1], help="E2: neighbours averaged per action")
     args = ap.parse_args(argv)
-    which = args.only or ["e1", "e2", "e3", "e4", "e5"]
+    which = args.only or ["e1", "e2", "e3", "e4", "e5", "e6", "e7"]
     t0 = time.time()
-    ds, obs, act = load(None if which == ["e5"] else args.data_episodes)
+    ds, obs, act = load(None if set(which) <= {"e5", "e6", "e7"} else args.data_episodes)
     print(
         f"{ds.metadata['dataset']} v{ds.metadata['dataset_version']} ({ds.metadata['generator_version']}): "
         f"{len(ds.episode_lengths)} episodes, {len(act):,} transitions"
@@ -299,6 +377,10 @@ def main(argv=None) -> None:
         e4(ds, obs, act, args.habit, args.seeds, args.steps, args.episodes)
     if "e5" in which:
         e5(ds, obs, act, args.habit[-1:], args.seeds, args.steps, args.episodes, args.data_episodes)
+    if "e6" in which:
+        e6(args.slips, args.seeds, args.steps, args.episodes, args.data_episodes)
+    if "e7" in which:
+        e7(args.noise_scale, args.seeds, args.steps, args.episodes, args.data_episodes)
     print(f"\n({time.time() - t0:.0f} s)")
 
 

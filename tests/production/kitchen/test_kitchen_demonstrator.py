@@ -138,3 +138,31 @@ def test_standard_demonstrator_never_detours_or_pauses():
             break
     assert len(policy.log) > 10 and not [entry for entry in policy.log if entry[1] == "via"]
     assert paused == 0
+
+
+def test_slips_push_the_arm_off_course_in_approaches_and_transits_and_the_script_recovers():
+    # Demonstrator(slips=p) (docs/experiments/kitchen-learnability, E6): runs of 2-5 steps of one held arm
+    # velocity, only in SLIP_PHASES; the episode still solves its subtasks; slips=0 draws nothing extra
+    from d5rl.production.kitchen.demonstrator import SLIP_PHASES, SLIP_STEPS
+
+    env = KitchenEnv(obs_mode="state", tasks=COMBINATIONS[1])
+    env.reset(seed=0)
+    policy = Demonstrator(env, COMBINATIONS[1], np.random.default_rng(1), slips=0.05)
+    slipping, phases = [], []
+    for _ in range(280):
+        action = policy.act()
+        slipping.append(policy.slipping)
+        phases.append(policy._phase.name if policy._phase is not None else None)
+        if policy.finished:
+            break
+        _, _, _, _, info = env.step(action)
+    runs, n = [], 0
+    for s in slipping + [False]:
+        if s:
+            n += 1
+        elif n:
+            runs.append(n)
+            n = 0
+    assert len(runs) >= 3 and all(SLIP_STEPS[0] <= r < SLIP_STEPS[1] for r in runs), runs
+    assert {p for p, s in zip(phases, slipping) if s} <= set(SLIP_PHASES)
+    assert info["solved"][[SUBTASK_NAMES.index(s) for s in COMBINATIONS[1]]].all()
