@@ -140,13 +140,14 @@ def _tables(results: list[CellResult], out: Path, reps: int, seed: int) -> list[
         table = score_table(results, phase)
         if not table:
             continue
-        md = table_markdown(table, title)
+        tasks = {r.task for r in results if r.done and phase in r.final}  # with the stale ones: every row
+        md = table_markdown(table, title, tasks)
         (out / f"{name}.md").write_text(md)
         (out / f"{name}.csv").write_text(table_csv(table))
         agg = aggregate(table, reps=reps, seed=seed)
         agg_rows += aggregate_csv(agg, name)
         parts += [md, aggregate_markdown(agg, f"Aggregate ({title.split(': ')[1]})", reps)]
-        vs = comparison_markdown(table, phase, title)
+        vs = comparison_markdown(table, phase, title, tasks)
         if vs:
             (out / f"{name}_vs_paper.md").write_text(vs)
             parts.append(vs)

@@ -24,8 +24,9 @@ def _fmt(x: float, digits: int = 3) -> str:
     return f"{x:.{digits}f}"
 
 
-def _table_rows(table: dict, algos: list[str]):
-    tasks = sorted({t for t, _ in table}, key=task_order)
+def _table_rows(table: dict, algos: list[str], tasks=()):
+    """One row per task of ``table`` and of ``tasks`` (a task whose cells are all stale keeps its row, "-")."""
+    tasks = sorted({t for t, _ in table} | set(tasks), key=task_order)
     rows = []
     for task in tasks:
         entries = {}
@@ -82,9 +83,9 @@ def _grid_markdown(algos: list[str], rows, cell, label=lambda task: task) -> lis
     return lines
 
 
-def table_markdown(table: dict, title: str) -> str:
+def table_markdown(table: dict, title: str, tasks=()) -> str:
     algos = method_order({a for _, a in table})
-    rows = _table_rows(table, algos)
+    rows = _table_rows(table, algos, tasks)
     seeds = _most_seeds(rows)
     lines = _grid_markdown(algos, rows, lambda task, a, e: _entry(e, seeds))
     return "\n".join([f"### {title}", ""] + lines) + "\n"
@@ -95,16 +96,18 @@ _LATER_VERSION = (
 )
 
 
-def comparison_markdown(table: dict, phase: str, title: str) -> str | None:
+def comparison_markdown(table: dict, phase: str, title: str, tasks=()) -> str | None:
     """Our table next to the paper's: each entry "ours / paper" (mean ± std), None if the paper has no row.
 
     Its columns are the methods run here and every method the paper reports for these rows, so a method
     not run yet shows as "- / the paper's number" rather than vanishing from the table.  A task the paper
-    did not benchmark keeps its row, labelled so, its entries "ours / -": the table has every task of
-    the grid, as the one without the paper's does."""
+    did not benchmark keeps its row, labelled so, its entries "ours / -", and so does a task of ``tasks``
+    whose cells are all stale ("- / the paper's"): the table has every task of the grid, as the one without
+    the paper's does."""
 
-    algos = method_order({a for _, a in table}.union(*(paper_methods(t, phase) for t, _ in table)))
-    rows = _table_rows(table, algos)
+    every = {t for t, _ in table} | set(tasks)
+    algos = method_order({a for _, a in table}.union(*(paper_methods(t, phase) for t in every)))
+    rows = _table_rows(table, algos, tasks)
     if not any(paper_methods(task, phase) for _, task, _ in rows):
         return None
     seeds = _most_seeds(rows)

@@ -114,3 +114,14 @@ def test_a_report_of_only_stale_cells_says_so_and_writes_nothing(tmp_path):
     with pytest.raises(ReportError, match=r"every finished cell under .* is stale \(2; e\.g\. toy-reach-v0/bc/seed0"):
         write_report(tmp_path, reps=50, plots=False)
     assert not (tmp_path / "report").exists()  # no half-written report beside a stale one
+
+
+def test_a_task_whose_cells_are_all_stale_keeps_its_row(tmp_path):
+    cells = expand_grid([TASK, "toy-reach-pixels-v0"], ["bc"], [0], 10, 0, job=JOB, tuned=False)
+    run_bench(cells, tmp_path, workers=0, progress=False)
+    pixels = next(c for c in cells if c.task == "toy-reach-pixels-v0")
+    _make_stale(pixels.directory(tmp_path))
+    write_report(tmp_path, reps=50, plots=False)
+    table = (tmp_path / "report" / "table1_offline.md").read_text()
+    assert "| toy-reach-pixels-v0 | - |" in table  # waiting to be trained again, not gone
+    assert f"| {TASK} | 0.250 ± 0.000 |" in table

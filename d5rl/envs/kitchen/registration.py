@@ -7,8 +7,11 @@ MAX_EPISODE_STEPS = 280  # control steps of 0.08 s (the D5RL release's standard 
 
 STANDARD_DATASET = DatasetSpec(
     name="kitchen-standard",
-    version=1,  # 1: demonstrator without detours or pauses (generator kitchen-standard-demos-6)
+    # 1: demonstrator without detours or pauses (generator kitchen-standard-demos-6); 2: the same generator
+    # with portable numerics (the same bytes on every x86-64 CPU)
+    version=2,
     generator="d5rl.production.kitchen.data:KitchenStandardGenerator",
+    numerics="portable",
     num_episodes=563,
     episodes_per_shard=16,
     description="scripted demonstrations of 22 four-subtask combinations in a fixed order (paper: 563 episodes)",
