@@ -34,7 +34,7 @@ from d5rl.registry import get_spec, list_tasks
 
 REFERENCES = Path(__file__).with_name("references.json")
 TOY = ("toy-reach", "toy-reach-pixels")  # generated whole by the test suite
-WHOLE = TOY  # referenced whole
+WHOLE = TOY + ("a1-v1-locomotion",)  # referenced whole (a1-v1-locomotion: the data of the published v1 A1 cells)
 DIGEST_HEX = 16  # per-episode digests: 64 bits tell which episode differs, at a quarter of the size
 
 
