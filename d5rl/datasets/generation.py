@@ -233,7 +233,8 @@ def stale_data(task: str, recorded: dict | None) -> str | None:
         return None
     if now is None:
         return None
-    diffs = [k for k in now if recorded.get(k) != now[k]]
+    # a record without generator inputs (made before runs kept them) cannot tell which inputs it had
+    diffs = [k for k in now if recorded.get(k) != now[k] and (k != "generator_inputs" or k in recorded)]
     if not diffs:
         return None
     if diffs == ["generator_inputs"]:

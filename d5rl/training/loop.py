@@ -199,7 +199,8 @@ def _data_record(ds) -> dict | None:
     if not all(k in meta for k in RESULT_IDENTITY_KEYS):
         return None
     source = {"source": meta["source"]} if "source" in meta else {}  # an imported dataset: which file
-    return {**{k: meta[k] for k in RESULT_IDENTITY_KEYS}, "episodes": int(ds.num_episodes), **source}
+    inputs = {"generator_inputs": meta["generator_inputs"]} if "generator_inputs" in meta else {}
+    return {**{k: meta[k] for k in RESULT_IDENTITY_KEYS}, **inputs, "episodes": int(ds.num_episodes), **source}
 
 
 def _write_config(

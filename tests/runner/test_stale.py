@@ -125,3 +125,21 @@ def test_a_task_whose_cells_are_all_stale_keeps_its_row(tmp_path):
     table = (tmp_path / "report" / "table1_offline.md").read_text()
     assert "| toy-reach-pixels-v0 | - |" in table  # waiting to be trained again, not gone
     assert f"| {TASK} | 0.250 ± 0.000 |" in table
+
+
+def test_a_run_records_the_generator_inputs_its_data_was_made_from():
+    from types import SimpleNamespace
+
+    from d5rl.training.loop import _data_record
+
+    ident = data_identity("a1-walk-v1")
+    assert set(ident["generator_inputs"]) == {"speed-0.5-v1", "speed-0.8-v1", "speed-1.0-v1"}
+    record = _data_record(SimpleNamespace(metadata={**ident, "task_id": "a1-walk-v1"}, num_episodes=5))
+    assert record == {**ident, "episodes": 5}
+    assert stale_data("a1-walk-v1", record) is None
+    other = {**record, "generator_inputs": {**ident["generator_inputs"], "speed-0.8-v1": "0" * 64}}
+    assert "other generator inputs than the published ones" in stale_data("a1-walk-v1", other)
+    # a record made before runs kept the inputs cannot tell: not stale for that reason alone
+    older = {k: v for k, v in record.items() if k != "generator_inputs"}
+    assert stale_data("a1-walk-v1", older) is None
+    assert stale_data("a1-walk-v1", {**older, "dataset_version": 0}) is not None
