@@ -59,6 +59,21 @@ def train_bc(observations, actions, seed: int, steps: int, chunk: int = 100, wei
     return agent
 
 
+def bc_columns(x, y, seeds, steps: int, episodes: int, weights=None) -> str:
+    """BC trained on ``(x, y)`` once per seed and evaluated on ``episodes`` of the mixed task: the table
+    columns "score per seed | mean | subtasks done" (subtask rates averaged over the seeds)."""
+    from d5rl.training.evaluation import evaluate
+
+    scores, stats = [], {}
+    for seed in seeds:
+        r = evaluate(train_bc(x, y, seed, steps, weights=weights), TASK, episodes, seed=seed, num_envs=5)
+        scores.append(r["score"])
+        for k, v in r.get("stats", {}).items():
+            stats[k] = stats.get(k, 0.0) + v / len(seeds)
+    per_seed = ", ".join(f"{s:.3f}" for s in scores)
+    return f"{per_seed} | {np.mean(scores):.3f} | {_subtask_cols(stats)}"
+
+
 def load(episodes: int | None):
     from d5rl.datasets.loading import load_dataset
 
@@ -78,7 +93,6 @@ def _subtask_cols(stats: dict) -> str:
 
 
 def e1(ds, obs, act, seeds, steps, episodes) -> None:
-    from d5rl.training.evaluation import evaluate
 
     first = first_subtasks(ds)
     subsets = [("all", np.ones(len(first), bool))]
@@ -94,14 +108,8 @@ def e1(ds, obs, act, seeds, steps, episodes) -> None:
     print("|---|---:|---|---:|---|")
     for what, keep in subsets:
         rows = np.flatnonzero(keep[ds.transition_episode])
-        scores, stats = [], {}
-        for seed in seeds:
-            r = evaluate(train_bc(obs[rows], act[rows], seed, steps), TASK, episodes, seed=seed, num_envs=5)
-            scores.append(r["score"])
-            for k, v in r.get("stats", {}).items():
-                stats[k] = stats.get(k, 0.0) + v / len(seeds)
-        per_seed = ", ".join(f"{s:.3f}" for s in scores)
-        print(f"| {what} | {keep.sum()} | {per_seed} | {np.mean(scores):.3f} | {_subtask_cols(stats)} |", flush=True)
+        cols = bc_columns(obs[rows], act[rows], seeds, steps, episodes)
+        print(f"| {what} | {keep.sum()} | {cols} |", flush=True)
 
 
 def e2(ds, obs, act, ks, episodes) -> None:
@@ -193,7 +201,6 @@ def e4(ds, obs, act, habits, seeds, steps, episodes) -> None:
     """BC with batches drawn as if the data's orders followed an operator's habit (probability ``p`` of
     the habitual next subtask at every choice): what a demonstrator with that habit would teach."""
     from d5rl.production.kitchen.data import COMBINATIONS, order_probabilities
-    from d5rl.training.evaluation import evaluate
 
     combo = np.array([COMBINATIONS.index(tuple(m["subtasks"])) for m in ds.episode_meta])
     counts = np.bincount(combo, minlength=len(COMBINATIONS))
@@ -209,16 +216,8 @@ def e4(ds, obs, act, habits, seeds, steps, episodes) -> None:
         w = w / w.sum()
         mw = sum(q for c, q in zip(COMBINATIONS, probs) if c[0] == "microwave")
         mwk = sum(q for c, q in zip(COMBINATIONS, probs) if c[:2] == ("microwave", "kettle"))
-        scores, stats = [], {}
-        for seed in seeds:
-            r = evaluate(train_bc(obs, act, seed, steps, weights=w), TASK, episodes, seed=seed, num_envs=5)
-            scores.append(r["score"])
-            for k, v in r.get("stats", {}).items():
-                stats[k] = stats.get(k, 0.0) + v / len(seeds)
-        per_seed = ", ".join(f"{s:.3f}" for s in scores)
-        print(
-            f"| {p} | {mw:.0%} | {mwk:.0%} | {per_seed} | {np.mean(scores):.3f} | {_subtask_cols(stats)} |", flush=True
-        )
+        cols = bc_columns(obs, act, seeds, steps, episodes, weights=w)
+        print(f"| {p} | {mw:.0%} | {mwk:.0%} | {cols} |", flush=True)
 
 
 def variant_task(tag: str, description: str, **generator_kwargs) -> str:
@@ -250,7 +249,6 @@ def e5(ds, obs, act, habits, seeds, steps, episodes, data_episodes) -> None:
     """BC on data generated with the habit (the first ``data_episodes`` episodes), next to BC on as many
     episodes of the dataset."""
     from d5rl.datasets.loading import load_dataset
-    from d5rl.training.evaluation import evaluate
 
     n = data_episodes or 160
     print(f"\nE5: BC {steps} steps on the first {n} episodes of data generated with the habit; {episodes} episodes")
@@ -268,21 +266,14 @@ def e5(ds, obs, act, habits, seeds, steps, episodes, data_episodes) -> None:
             x, y, meta = np.asarray(hd.observations, np.float32), np.asarray(hd.arrays["actions"]), hd.episode_meta
         orders = [tuple(m["subtasks"]) for m in meta]
         common = max(orders.count(o) for o in set(orders))
-        scores, stats = [], {}
-        for seed in seeds:
-            r = evaluate(train_bc(x, y, seed, steps), TASK, episodes, seed=seed, num_envs=5)
-            scores.append(r["score"])
-            for k, v in r.get("stats", {}).items():
-                stats[k] = stats.get(k, 0.0) + v / len(seeds)
-        per_seed = ", ".join(f"{s:.3f}" for s in scores)
-        print(f"| {what} | {common} | {per_seed} | {np.mean(scores):.3f} | {_subtask_cols(stats)} |", flush=True)
+        cols = bc_columns(x, y, seeds, steps, episodes)
+        print(f"| {what} | {common} | {cols} |", flush=True)
 
 
 def e6(slips, seeds, steps, episodes, data_episodes) -> None:
     """BC on data whose demonstrator slips off course and corrects (``Demonstrator(slips=p)``), the first
     ``data_episodes`` episodes; E5's first row is the dataset's own at the same size."""
     from d5rl.datasets.loading import load_dataset
-    from d5rl.training.evaluation import evaluate
 
     n = data_episodes or 160
     print(f"\nE6: BC {steps} steps on the first {n} episodes of data with slips; {episodes} episodes")
@@ -297,15 +288,9 @@ def e6(slips, seeds, steps, episodes, data_episodes) -> None:
         solved = np.mean([m["num_solved"] for m in hd.episode_meta])
         # slip steps: the arm's action held constant over consecutive steps outside the controller's law
         held = np.all(np.abs(np.diff(y[:, :7], axis=0)) < 1e-7, axis=1).mean()
-        scores, stats = [], {}
-        for seed in seeds:
-            r = evaluate(train_bc(x, y, seed, steps), TASK, episodes, seed=seed, num_envs=5)
-            scores.append(r["score"])
-            for k, v in r.get("stats", {}).items():
-                stats[k] = stats.get(k, 0.0) + v / len(seeds)
-        per_seed = ", ".join(f"{s:.3f}" for s in scores)
+        cols = bc_columns(x, y, seeds, steps, episodes)
         print(
-            f"| {p} | {held:.1%} | {solved:.2f} | {per_seed} | {np.mean(scores):.3f} | {_subtask_cols(stats)} |",
+            f"| {p} | {held:.1%} | {solved:.2f} | {cols} |",
             flush=True,
         )
 
@@ -314,7 +299,6 @@ def e7(noise_scales, seeds, steps, episodes, data_episodes) -> None:
     """BC on one order of subtasks (an operator with habit 1: microwave, kettle, bottom burner, top burner)
     with the demonstrator's action noise scaled: does a wider spread of states teach BC to chain subtasks?"""
     from d5rl.datasets.loading import load_dataset
-    from d5rl.training.evaluation import evaluate
 
     n = data_episodes or 160
     print(f"\nE7: BC {steps} steps on the first {n} episodes of one order, action noise scaled; {episodes} episodes")
@@ -330,15 +314,9 @@ def e7(noise_scales, seeds, steps, episodes, data_episodes) -> None:
         x, y = np.asarray(hd.observations, np.float32), np.asarray(hd.arrays["actions"], np.float32)
         solved = np.mean([m["num_solved"] for m in hd.episode_meta])
         noise = np.mean([m["style"]["noise"] for m in hd.episode_meta])
-        scores, stats = [], {}
-        for seed in seeds:
-            r = evaluate(train_bc(x, y, seed, steps), TASK, episodes, seed=seed, num_envs=5)
-            scores.append(r["score"])
-            for k, v in r.get("stats", {}).items():
-                stats[k] = stats.get(k, 0.0) + v / len(seeds)
-        per_seed = ", ".join(f"{s:.3f}" for s in scores)
+        cols = bc_columns(x, y, seeds, steps, episodes)
         print(
-            f"| {scale} | {noise:.3f} | {solved:.2f} | {per_seed} | {np.mean(scores):.3f} | {_subtask_cols(stats)} |",
+            f"| {scale} | {noise:.3f} | {solved:.2f} | {cols} |",
             flush=True,
         )
 
