@@ -34,7 +34,8 @@ from d5rl.registry import get_spec, list_tasks
 
 REFERENCES = Path(__file__).with_name("references.json")
 TOY = ("toy-reach", "toy-reach-pixels")  # generated whole by the test suite
-WHOLE = TOY + ("a1-v1-locomotion",)  # referenced whole (a1-v1-locomotion: the data of the published v1 A1 cells)
+# referenced whole: the data of the published v1 A1 cells (and of the BC runs that chose the hiking data)
+WHOLE = TOY + ("a1-v1-locomotion", "a1-v1-hiking", "a1-v1-hiking-smooth")
 DIGEST_HEX = 16  # per-episode digests: 64 bits tell which episode differs, at a quarter of the size
 
 
