@@ -210,16 +210,22 @@ def _run_shard(root: str, index: int, start: int, stop: int, ident: dict) -> dic
 RESULT_IDENTITY_KEYS = ("dataset", "dataset_version", "generator_version", "seed")
 
 
+def result_identity(meta: dict) -> dict:
+    """The :data:`RESULT_IDENTITY_KEYS` of a dataset's identity or metadata, with its generator inputs where
+    it has them."""
+    return {k: meta[k] for k in (*RESULT_IDENTITY_KEYS, "generator_inputs") if k in meta}
+
+
 def data_identity(task: str | TaskSpec, seed: int | None = None) -> dict | None:
     """What ``task``'s dataset is when this d5rl generates it (at ``seed``, default the dataset's):
-    ``{"dataset", "dataset_version", "generator_version", "seed"}``; None for a task without a dataset."""
+    :func:`result_identity` of its identity; None for a task without a dataset."""
     spec = get_spec(task)
     if spec.dataset is None:
         return None
     dspec = spec.dataset
     seed = dspec.default_seed if seed is None else int(seed)
     ident = _identity(dspec, seed, str(resolve(dspec.producer).version))
-    return {k: ident[k] for k in (*RESULT_IDENTITY_KEYS, "generator_inputs") if k in ident}
+    return result_identity(ident)
 
 
 def stale_data(task: str, recorded: dict | None) -> str | None:

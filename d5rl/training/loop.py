@@ -25,7 +25,7 @@ from d5rl.agents.config import Config
 from d5rl.agents.encoders import is_pixel_obs
 from d5rl.datasets.dataset import mc_tail
 from d5rl.datasets.format import disk_full_error
-from d5rl.datasets.generation import RESULT_IDENTITY_KEYS
+from d5rl.datasets.generation import RESULT_IDENTITY_KEYS, result_identity
 from d5rl.files import lock_holder, try_lock
 from d5rl.progress import progress_bar
 from d5rl.training.checkpoint import Checkpoint, check_state, load_checkpoint, restore_agent, save_checkpoint
@@ -199,8 +199,7 @@ def _data_record(ds) -> dict | None:
     if not all(k in meta for k in RESULT_IDENTITY_KEYS):
         return None
     source = {"source": meta["source"]} if "source" in meta else {}  # an imported dataset: which file
-    inputs = {"generator_inputs": meta["generator_inputs"]} if "generator_inputs" in meta else {}
-    return {**{k: meta[k] for k in RESULT_IDENTITY_KEYS}, **inputs, "episodes": int(ds.num_episodes), **source}
+    return {**result_identity(meta), "episodes": int(ds.num_episodes), **source}
 
 
 def _write_config(
