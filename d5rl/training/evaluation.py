@@ -52,10 +52,13 @@ def evaluate(
     ``num_envs`` environments step in lockstep and the agent acts on all of them in
     one batch; ``processes=True`` puts each in its own process (gymnasium
     ``AsyncVectorEnv``).  Episode ``i`` resets with seed ``seed + i`` and a stochastic
-    policy acts in it with keys drawn from ``(seed, i, step)``, so results do not depend
-    on ``num_envs``.  ``video_path`` records the first episode.  ``progress`` keeps the finished
-    episodes on disk, so that an evaluation killed midway resumes at its first unfinished episode with
-    the same result (see :class:`EvalProgress`).
+    policy acts in it with keys drawn from ``(seed, i, step)``, so its draws do not depend
+    on ``num_envs``.  The policy's arithmetic does, in the last bit: a batch of one gives actions
+    that differ from a batch of five by ~1e-7, and on a task whose episodes all start alike (A1
+    walk and run) that can change the rollout (docs/experiments/a1-updates).  ``video_path``
+    records the first episode.  ``progress`` keeps the finished episodes on disk, so that an
+    evaluation killed midway resumes at its first unfinished episode with the same result (see
+    :class:`EvalProgress`).
     """
     if int(num_episodes) < 1:
         raise D5RLError(f"cannot evaluate on {num_episodes} episodes", "evaluate on at least 1 episode")
