@@ -180,7 +180,12 @@ def _resolved_summary(cell, job: str) -> str:
 
 def cmd_report(args) -> int:
     path = write_report(
-        args.run_dir, args.out, reps=args.reps, seed=args.seed, plots=not args.no_plots, videos=args.videos
+        args.run_dir,
+        args.out,
+        reps=args.reps,
+        seed=args.seed,
+        plots=not args.no_plots,
+        videos=args.video_tasks or args.videos,
     )
     print(path.read_text() if args.print else f"wrote {path}")
     return 0
@@ -261,6 +266,12 @@ def add_report_parser(subparsers) -> argparse.ArgumentParser:
         "--videos",
         action="store_true",
         help="render one rollout GIF per task from its best cell's checkpoint (needs JAX and GL)",
+    )
+    q.add_argument(
+        "--video-tasks",
+        nargs="+",
+        metavar="TASK",
+        help="as --videos, for these tasks only (the others' GIFs stay as they are)",
     )
     q.add_argument("--print", action="store_true", help="print report.md")
     q.set_defaults(func=cmd_report)

@@ -30,6 +30,7 @@ from __future__ import annotations
 
 import importlib.util
 import os
+from collections.abc import Collection
 from pathlib import Path
 
 from d5rl.errors import is_int
@@ -65,10 +66,11 @@ def write_report(
     reps: int = 2000,
     seed: int = 0,
     plots: bool = True,
-    videos: bool = False,
+    videos: bool | Collection[str] = False,
 ) -> Path:
     """Write every report file; returns the path of ``report.md``.  ``videos``: also render one rollout GIF
-    per task from the best cell's checkpoint (:mod:`d5rl.runner.videos`)."""
+    per task from the best cell's checkpoint (:mod:`d5rl.runner.videos`): for every task (True) or for the
+    tasks named."""
     run_dir = Path(run_dir)
     for name, v, least, default in (("reps", reps, 1, 2000), ("seed", seed, 0, 0)):
         if not is_int(v, lo=least):
@@ -92,6 +94,7 @@ def write_report(
             f"no finished cell under {run_dir} has evaluations",
             "check the cells' log.txt / error.txt, then resume with the same `d5rl bench` command",
         )
+    filmed = _filmed(results, videos, run_dir)
     out = Path(out_dir) if out_dir else run_dir / "report"
     out.mkdir(parents=True, exist_ok=True)
 
@@ -104,10 +107,10 @@ def write_report(
             parts.append(md)
     if plots:
         parts += _curves(results, out)
-    if videos:
+    if filmed:
         from d5rl.runner.videos import write_rollout_gifs  # JAX (the train extra): only for --videos
 
-        write_rollout_gifs(results, out)
+        write_rollout_gifs([r for r in results if r.task in filmed], out)
     parts += _rollouts(out) + _caveats(results) + _stale(results) + _unfinished(results, out) + _videos(results, out)
     path = out / "report.md"
     path.write_text("\n".join(parts))
@@ -163,6 +166,20 @@ def _curves(results: list[CellResult], out: Path) -> list[str]:
     if not pngs:
         return []
     return ["## Learning curves", "", *(f"![{p.stem}]({os.path.relpath(p, out)})" for p in pngs), ""]
+
+
+def _filmed(results: list[CellResult], videos: bool | Collection[str], run_dir: Path) -> set[str]:
+    """The tasks ``videos`` asks GIFs for: all of the grid's (True), none (False) or those named, each of which
+    the grid must have."""
+    tasks = {r.task for r in results}
+    if isinstance(videos, bool):
+        return tasks if videos else set()
+    missing = sorted(set(videos) - tasks)
+    if missing:
+        raise ReportError(
+            f"no cells of {', '.join(missing)} under {run_dir}", f"name tasks of the grid: {', '.join(sorted(tasks))}"
+        )
+    return set(videos)
 
 
 def _rollouts(out: Path) -> list[str]:

@@ -2,8 +2,9 @@
 
 ``d5rl report RUN_DIR --videos`` calls :func:`write_rollout_gifs`.  For each task it takes the finished,
 current cell with the highest final score (ties: the paper's method order, then the lower seed), restores
-its agent from the cell's checkpoint, runs five evaluation episodes (seeds 0-4, the agent's evaluation
-actions), replays the median-scoring one with the env's render camera (fast render settings, every
+its agent from the cell's checkpoint, replays the first round of its final evaluation (the first
+``eval_envs`` episodes, five in the published grids, stepped together as they ran, so they score what they
+scored there), films the median-scoring one with the env's render camera (fast render settings, every
 ``EVERY``-th step) and writes it to ``videos/<task>.gif``.  Cells whose checkpoint is not on this
 machine (grids carried between machines keep results, not checkpoints) are passed over for the next
 best, but a GIF written earlier is kept when its caption names a cell ranked above every cell whose
@@ -27,6 +28,7 @@ from d5rl.video import FrameRenderer, write_gif
 GIFS = "videos"  # the report's folder of rollout GIFs and their captions.json
 GIF_SIZE = (120, 160)  # (height, width) of the frames
 EVERY = 2  # keep every 2nd step: ~10 frames per second of simulated time at 20 Hz control
+EPISODE = "; final evaluation's episode "  # a caption after its cell's label: which episode the GIF shows
 
 
 def ranked_cells(results, task: str) -> list:
@@ -38,57 +40,61 @@ def ranked_cells(results, task: str) -> list:
     return sorted(cells, key=rank)
 
 
-def _episode(agent, env, task: str, seed: int, camera=None, every: int = EVERY):
-    """``(normalized score or return, frames)`` of one evaluation episode (frames only with a camera: after the
-    reset, every ``every``-th step and after the last)."""
-    import jax  # the train extra: a report without videos does not need it
-
-    key = jax.random.PRNGKey(seed)
-
-    def act(observations, live, steps):
-        nonlocal key
-        key, k = jax.random.split(key)
-        batch = jax.tree_util.tree_map(lambda x: np.asarray(x)[None], observations[0])
-        return np.asarray(agent.eval_actions(batch, seed=k))
+def _round(agent, envs, task: str, seed: int, film: int | None = None, camera=None, every: int = EVERY):
+    """``(each episode's normalized score or return, frames)`` of the first round of an evaluation with seed
+    ``seed``: its first ``len(envs)`` episodes, stepped together as :func:`d5rl.training.evaluation.evaluate`
+    steps them, so each replays exactly, to the last bit of the actions.  Frames (with a camera) of episode
+    ``film``: after the reset, every ``every``-th step and after the last."""
+    from d5rl.training.evaluation import batched_policy, episode_seeds  # JAX (the train extra)
 
     frames = []
 
-    def film(step: Step) -> None:
-        if (step.t + 1) % every == 0 or step.done:
+    def on_reset(i, *_):
+        if i == film:
             frames.append(camera())
 
-    (episode,) = rollout(
-        [env],
-        act,
-        [seed],
-        on_reset=(lambda *_: frames.append(camera())) if camera else None,
-        on_step=film if camera else None,
+    def on_step(step: Step) -> None:
+        if step.episode == film and ((step.t + 1) % every == 0 or step.done):
+            frames.append(camera())
+
+    episodes = rollout(
+        envs,
+        batched_policy(agent, seed),
+        episode_seeds(seed, 0, len(envs)),
+        on_reset=on_reset if camera else None,
+        on_step=on_step if camera else None,
     )
     scorer = episode_scorer(task)
-    return (scorer(episode.ret, episode.info) if scorer is not None else episode.ret), frames
+    return [scorer(e.ret, e.info) if scorer is not None else e.ret for e in episodes], frames
 
 
-def typical_rollout(cell_dir: Path, task: str, *, episodes: int = 5, size=GIF_SIZE, every: int = EVERY):
-    """The median-scoring of ``episodes`` evaluation episodes (seeds 0, 1, ...; the lower seed on ties) of
-    the agent saved in ``cell_dir``: ``(frames, frames per second, its seed, every episode's score)``."""
+def typical_rollout(cell_dir: Path, task: str, *, size=GIF_SIZE, every: int = EVERY):
+    """The median-scoring episode (the earlier on ties) of the first round of the final evaluation of the agent
+    saved in ``cell_dir``: the first ``eval_envs`` of its episodes, replayed beside each other as they ran, so
+    the episode shown is one the cell's published score averages.  ``(frames, frames per second, the episode's
+    index in the evaluation, every episode's score)``."""
     from d5rl.training.loop import load_run  # JAX (the train extra): loaded by the commands that need it
+    from d5rl.training.parts import evaluation_seed
 
     agent, resolved = load_run(cell_dir)
-    env = make_task_env(task, resolved["train"]["frame_stack"], render_mode="rgb_array")  # envs without a
-    # MuJoCo camera (toy) are filmed through render(), which needs a render mode as in Gymnasium
+    train = resolved["train"]
+    width = max(1, min(int(train["eval_envs"]), int(train["final_eval_episodes"] or train["eval_episodes"])))
+    seed = evaluation_seed(resolved["seed"])
+    # envs without a MuJoCo camera (toy) are filmed through render(), which needs a render mode as in Gymnasium
+    envs = [make_task_env(task, train["frame_stack"], render_mode="rgb_array") for _ in range(width)]
     try:
-        scores = [_episode(agent, env, task, s)[0] for s in range(episodes)]
-        median = sorted(scores)[(episodes - 1) // 2]
-        seed = scores.index(median)
-        camera = FrameRenderer(env, size, "fast")
+        scores, _ = _round(agent, envs, task, seed)
+        shown = scores.index(sorted(scores)[(width - 1) // 2])
+        camera = FrameRenderer(envs[shown], size, "fast")
         try:
-            again, frames = _episode(agent, env, task, seed, camera, every)
+            again, frames = _round(agent, envs, task, seed, shown, camera, every)
         finally:
             camera.close()
     finally:
-        env.close()
-    assert again == scores[seed], "evaluation episodes must replay exactly"
-    return frames, float(env.unwrapped.metadata.get("render_fps", 20)) / every, seed, scores
+        for env in envs:
+            env.close()
+    assert again == scores, "evaluation episodes must replay exactly"
+    return frames, float(envs[0].unwrapped.metadata.get("render_fps", 20)) / every, shown, scores
 
 
 def write_rollout_gifs(results, out_dir: Path, log=print) -> dict[str, str]:
@@ -99,15 +105,18 @@ def write_rollout_gifs(results, out_dir: Path, log=print) -> dict[str, str]:
     for task in sorted({r.task for r in results}):
         shown = captions.get(task) if (videos / f"{task}.gif").exists() else None
         for cell in ranked_cells(results, task):
+            here = RunDir(cell.directory).checkpoint.exists()
             if shown is not None and shown.startswith(_cell_label(cell) + ";"):
-                break  # the GIF already shows this cell, better than any whose checkpoint is here: keep it
-            if not RunDir(cell.directory).checkpoint.exists():
+                if shown.startswith(_cell_label(cell) + EPISODE) or not here:
+                    break  # the GIF already shows this cell, better than any whose checkpoint is here: keep it
+                # else made by an earlier d5rl's GIF code (episodes of its own, one at a time): made again
+            if not here:
                 continue
-            frames, fps, seed, scores = typical_rollout(cell.directory, task)
+            frames, fps, shown, scores = typical_rollout(cell.directory, task)
             write_gif(videos / f"{task}.gif", frames, fps)
             captions[task] = (
-                f"{_cell_label(cell)}; episode seed {seed}, the median of {len(scores)} "
-                f"({', '.join(f'{x:.2f}' for x in scores)})"
+                f"{_cell_label(cell)}{EPISODE}{shown + 1}, the median of its first "
+                f"{len(scores)} ({', '.join(f'{x:.2f}' for x in scores)})"
             )
             log(f"rollout {task}: {captions[task]}")
             break

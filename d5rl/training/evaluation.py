@@ -53,9 +53,11 @@ def evaluate(
     one batch; ``processes=True`` puts each in its own process (gymnasium
     ``AsyncVectorEnv``).  Episode ``i`` resets with seed ``seed + i`` and a stochastic
     policy acts in it with keys drawn from ``(seed, i, step)``, so its draws do not depend
-    on ``num_envs``.  The policy's arithmetic does, in the last bit: a batch of one gives actions
-    that differ from a batch of five by ~1e-7, and on a task whose episodes all start alike (A1
-    walk and run) that can change the rollout (docs/experiments/a1-updates).  ``video_path``
+    on ``num_envs``.  The policy's arithmetic does, in the last bit, at one row: for each of the ten
+    agents a row's action has the same bits in batches of 2 to 10 rows, while a batch of one row (XLA's
+    matrix-vector product) differs by ~1e-7 (``num_envs=1``, or the last episode of a round still
+    running alone); on a task whose episodes all start alike (A1 walk and run) that can change the
+    rollout (docs/experiments/a1-updates).  ``video_path``
     records the first episode.  ``progress`` keeps the finished episodes on disk, so that an
     evaluation killed midway resumes at its first unfinished episode with the same result (see
     :class:`EvalProgress`).
@@ -78,16 +80,14 @@ def evaluate(
         episodes = []  # the first episode's video was not written: evaluate it again
     if episodes:
         print(f"evaluation resumes at episode {len(episodes) + 1} of {num_episodes} ({progress.path.name})", flush=True)
-    key = jax.random.PRNGKey(seed)
     with _EvalEnvs(task_id, frame_stack, num_envs, processes, video_path is not None, env_fn) as envs:
         while len(episodes) < num_episodes:
             first = len(episodes)
-            seeds = [seed + first + i for i in range(min(num_envs, num_episodes - first))]
             film = _Film(envs.render) if video_path is not None and first == 0 else None
             done = rollout(
                 envs.envs,
-                _batched_policy(agent, key, first),
-                seeds,
+                batched_policy(agent, seed, first),
+                episode_seeds(seed, first, min(num_envs, num_episodes - first)),
                 on_reset=film.on_reset if film else None,
                 on_step=film.on_step if film else None,
             )
@@ -106,9 +106,18 @@ def evaluate(
     return out
 
 
-def _batched_policy(agent, key, first: int):
-    """The agent's evaluation actions for a batch of episodes numbered from ``first``, each drawn with the key
-    of its (episode, step) (see :func:`_step_keys`)."""
+def episode_seeds(seed: int, first: int, count: int) -> list[int]:
+    """The reset seeds of an evaluation's episodes ``first`` to ``first + count - 1``: episode ``i`` of an
+    evaluation with seed ``seed`` resets with ``seed + i``."""
+    return [seed + first + i for i in range(count)]
+
+
+def batched_policy(agent, seed: int, first: int = 0):
+    """The :func:`d5rl.rollout.rollout` policy of an evaluation with seed ``seed`` for a batch of its episodes
+    numbered from ``first``: the agent's evaluation actions, each drawn with the key of its (episode, step)
+    (see :func:`_step_keys`).  Stepped beside the same episodes (:func:`episode_seeds`) it replays them exactly,
+    as the report's rollout GIFs do."""
+    key = jax.random.PRNGKey(seed)
 
     def act(observations, live, steps):
         return np.asarray(agent.eval_actions(_stack_obs(observations), seed=_step_keys(key, first + live, steps)))

@@ -207,7 +207,7 @@ class Evaluator:
             agent,
             self.task_id,
             episodes,
-            seed=10_000 * (self.seed + 1),
+            seed=evaluation_seed(self.seed),
             num_envs=self.cfg.eval_envs,
             frame_stack=self.frame_stack,
             processes=self.cfg.eval_processes,
@@ -218,6 +218,12 @@ class Evaluator:
         row = {k: res[k] for k in ("return", "return_std", "length", "success", "score") if k in res}
         self.logger.log(step, {f"eval/{self.task_id}/{k}": v for k, v in {**row, **res.get("stats", {})}.items()})
         return res
+
+
+def evaluation_seed(run_seed: int) -> int:
+    """The seed of every evaluation of the run with seed ``run_seed`` (its episodes reset with this seed, this
+    seed + 1, ...): the same at every step, so the learning curve compares the agent on the same episodes."""
+    return 10_000 * (int(run_seed) + 1)
 
 
 def fingerprint(agent) -> str:

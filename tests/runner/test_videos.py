@@ -8,18 +8,20 @@ import pytest
 pytest.importorskip("jax")
 
 from d5rl.runner import expand_grid, run_bench, write_report
+from d5rl.runner.report import ReportError
 from d5rl.runner.grid import DEFAULT_JOB
 
 PROTOCOL = {"eval_interval": 16, "eval_episodes": 2, "hidden_dims": "16,16", "batch_size": "16"}
 
 
-def test_report_renders_the_median_episode_of_the_best_cell(tmp_path):
+def test_report_renders_the_median_episode_of_the_best_cells_final_evaluation(tmp_path):
     import imageio.v2 as imageio
 
-    from d5rl.training.evaluation import evaluate
-    from d5rl.training.loop import load_run
+    from d5rl.runner.videos import typical_rollout
 
-    cells = expand_grid(["toy-reach-v0"], ["bc"], [0, 1], 16, 0, job=DEFAULT_JOB, overrides=PROTOCOL)
+    # a final evaluation of one round (5 episodes, 5 envs): the GIF's five episodes are all it averages
+    protocol = {**PROTOCOL, "final_eval_episodes": 5}
+    cells = expand_grid(["toy-reach-v0"], ["bc"], [0, 1], 16, 0, job=DEFAULT_JOB, overrides=protocol)
     assert not run_bench(cells, tmp_path, workers=0, progress=False).failed
     report = write_report(tmp_path, reps=20, plots=False, videos=True).read_text()
     gif = tmp_path / "report" / "videos" / "toy-reach-v0.gif"
@@ -32,12 +34,28 @@ def test_report_renders_the_median_episode_of_the_best_cell(tmp_path):
         finals[c.seed] = [r["eval/toy-reach-v0/score"] for r in rows if "eval/toy-reach-v0/score" in r][-1]
     best = max(finals, key=lambda s: (finals[s], -s))
     assert captions["toy-reach-v0"].startswith(f"BC seed {best} ")
-    # the episode shown is the median of the five evaluation episodes (seeds 0-4) of that agent
-    agent, _ = load_run(cells[best].directory(tmp_path))
-    scores = [evaluate(agent, "toy-reach-v0", 1, seed=s)["score"] for s in range(5)]
-    median = sorted(scores)[2]
-    shown = scores.index(median)
-    assert f"episode seed {shown}, the median of 5" in captions["toy-reach-v0"]
+    # the replayed episodes are the final evaluation's own: their mean is the cell's published score
+    _, _, shown, scores = typical_rollout(cells[best].directory(tmp_path), "toy-reach-v0")
+    assert len(scores) == 5 and np.mean(scores) == pytest.approx(finals[best], rel=1e-9, abs=1e-12)
+    assert len(set(scores)) > 1  # the toy's episodes differ, so the median below is a choice
+    assert scores[shown] == sorted(scores)[2] and shown == scores.index(sorted(scores)[2])
+    listed = ", ".join(f"{x:.2f}" for x in scores)
+    assert f"final evaluation's episode {shown + 1}, the median of its first 5 ({listed})" in captions["toy-reach-v0"]
+    # a GIF an earlier d5rl made of the same cell (its own episodes, one at a time) is made again
+    label = captions["toy-reach-v0"].split(";")[0]
+    old = {"toy-reach-v0": f"{label}; episode seed 3, the median of 5 (0.10, 0.20, 0.30, 0.40, 0.50)"}
+    (tmp_path / "report" / "videos" / "captions.json").write_text(json.dumps(old))
+    write_report(tmp_path, reps=20, plots=False, videos=True)
+    assert json.loads((tmp_path / "report" / "videos" / "captions.json").read_text()) == captions
+
+    # --video-tasks films the tasks named; one the grid does not have is refused before any work
+    from d5rl.cli import main
+
+    before = gif.read_bytes()
+    assert main(["report", str(tmp_path), "--no-plots", "--reps", "20", "--video-tasks", "toy-reach-v0"]) == 0
+    assert gif.read_bytes() == before
+    with pytest.raises(ReportError, match="no cells of toy-other-v0 under .*name tasks of the grid: toy-reach-v0"):
+        write_report(tmp_path, reps=20, plots=False, videos=["toy-other-v0"])
     frames = imageio.mimread(str(gif))
     assert len(frames) >= 2 and np.asarray(frames[0]).shape[-1] == 3  # (the GIF writer merges repeated frames)
 
