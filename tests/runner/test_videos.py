@@ -8,8 +8,8 @@ import pytest
 pytest.importorskip("jax")
 
 from d5rl.runner import expand_grid, run_bench, write_report
-from d5rl.runner.report import ReportError
 from d5rl.runner.grid import DEFAULT_JOB
+from d5rl.runner.report import ReportError
 
 PROTOCOL = {"eval_interval": 16, "eval_episodes": 2, "hidden_dims": "16,16", "batch_size": "16"}
 
