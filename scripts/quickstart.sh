@@ -10,4 +10,4 @@ d5rl generate a1-walk-v0 --episodes "$EPISODES"     # the first 48 episodes of t
 d5rl info a1-walk-v0
 d5rl train bc a1-walk-v0 --offline-steps "${STEPS:-5000}" --seed 0 --run-dir runs/quickstart/bc \
   --set dataset_episodes="$EPISODES" --set eval_interval=5000 --set eval_episodes=5
-d5rl eval runs/quickstart/bc --episodes 5
+d5rl eval runs/quickstart/bc   # replays the run's final evaluation from its checkpoint: the same score

@@ -77,10 +77,19 @@ def cmd_train(args) -> int:
 def add_eval_parser(subparsers) -> argparse.ArgumentParser:
     p = subparsers.add_parser("eval", help="evaluate a trained agent from its run directory")
     p.add_argument("run_dir", help="directory written by `d5rl train`")
-    p.add_argument("--episodes", type=int, default=10)
-    p.add_argument("--envs", type=int, default=5, help="environments stepped in lockstep")
+    p.add_argument(
+        "--episodes", type=int, default=None, help="how many episodes (default: as many as the run's final evaluation)"
+    )
+    p.add_argument(
+        "--envs", type=int, default=None, help="environments stepped in lockstep (default: the run's eval_envs)"
+    )
     p.add_argument("--processes", action="store_true", help="one process per environment")
-    p.add_argument("--seed", type=int, default=12345, help="episode i resets with seed + i")
+    p.add_argument(
+        "--seed",
+        type=int,
+        default=None,
+        help="episode i resets with seed + i (default: the run's evaluation seed, 10000 × (run seed + 1))",
+    )
     p.add_argument(
         "--video", default=None, metavar="PATH", help="record the first episode (.mp4, .mkv, .mov, .avi or .gif)"
     )
@@ -93,24 +102,35 @@ def add_eval_parser(subparsers) -> argparse.ArgumentParser:
 def cmd_eval(args) -> int:
     from d5rl.training.evaluation import evaluate  # JAX (the train extra): loaded by the commands that need it
     from d5rl.training.loop import load_run  # JAX (the train extra): loaded by the commands that need it
+    from d5rl.training.parts import evaluation_seed
+    from d5rl.training.rundir import RunDir
 
     for name, v in (("--episodes", args.episodes), ("--envs", args.envs)):
-        if v < 1:
+        if v is not None and v < 1:
             raise ConfigError(f"{name} must be at least 1, got {v}", f"pass e.g. {name} 10")
     agent, resolved = load_run(args.run_dir)
     task = args.task or resolved["task_id"]
     if task != resolved["task_id"]:
         _check_same_spaces(resolved["task_id"], task)
+    train = resolved["train"]
+    # the defaults are the run's final evaluation: on the run's own task they reproduce its summary.json
+    episodes = args.episodes or train["final_eval_episodes"] or train["eval_episodes"]
+    seed = evaluation_seed(resolved["seed"]) if args.seed is None else args.seed
     res = evaluate(
         agent,
         task,
-        args.episodes,
-        args.seed,
-        num_envs=args.envs,
-        frame_stack=resolved["train"]["frame_stack"],
+        episodes,
+        seed,
+        num_envs=args.envs or train["eval_envs"],
+        frame_stack=train["frame_stack"],
         processes=args.processes,
         video_path=args.video,
     )
+    final = (
+        RunDir(args.run_dir).read_summary() if (args.episodes, args.envs, args.seed, args.task) == (None,) * 4 else None
+    )
+    if final is not None and "score" in res and isinstance(final.get("score"), float):
+        res["final_evaluation_score"] = final["score"]  # what the run's own final evaluation scored
     res.pop("returns", None)
     if args.json:
         print(json.dumps({"task_id": task, **res}, indent=2))
@@ -122,6 +142,9 @@ def cmd_eval(args) -> int:
     )
     for k, v in res.get("stats", {}).items():
         print(f"  {k}: {v:.2f}")
+    if "final_evaluation_score" in res:
+        same = "the same" if res["final_evaluation_score"] == res["score"] else "not the same"
+        print(f"the run's final evaluation (summary.json) scored {res['final_evaluation_score']:.3f}: {same}")
     if "score" in res:
         print(f"normalized score: {res['score']:.3f} ± {res['score_std']:.3f}")
     else:

@@ -310,3 +310,24 @@ def test_a_broken_run_config_is_a_one_line_error_under_eval(tmp_path, text, matc
     with pytest.raises(Exception, match=match):
         load_run(tmp_path)
     assert cli_main(["eval", str(tmp_path)]) != 0
+
+
+def test_eval_by_default_reproduces_the_runs_final_evaluation(tmp_path, capsys):
+    """`d5rl eval RUN_DIR` replays the final evaluation (its episodes, seed and batch width) of the saved agent
+    and says whether it scored what summary.json says; other options evaluate other episodes."""
+    from d5rl.cli import main
+
+    run = tmp_path / "run"
+    overrides = SMALL + ["final_eval_episodes=4", "eval_envs=3"]
+    train(resolve("bc", "toy-reach-v0", overrides, offline_steps=16, seed=2), run, dataset=toy_dataset(10))
+    summary = json.loads((run / "summary.json").read_text())
+    assert main(["eval", str(run), "--json"]) == 0
+    out = json.loads(capsys.readouterr().out)
+    assert out["episodes"] == 4 and out["score"] == summary["score"] == out["final_evaluation_score"]
+    assert main(["eval", str(run)]) == 0
+    lines = capsys.readouterr().out.splitlines()
+    assert lines[-2] == f"the run's final evaluation (summary.json) scored {summary['score']:.3f}: the same"
+    assert lines[-1].startswith(f"normalized score: {summary['score']:.3f} ± ")
+    assert main(["eval", str(run), "--seed", "7", "--json"]) == 0
+    other = json.loads(capsys.readouterr().out)
+    assert "final_evaluation_score" not in other and other["score"] != summary["score"]
