@@ -6,8 +6,8 @@ cd "$(dirname "$0")/.."
 source scripts/install.sh train   # .venv with locked versions + robot-model assets
 
 EPISODES="${EPISODES:-48}"
-d5rl generate a1-walk-v0 --episodes "$EPISODES"     # the first 48 episodes of the full dataset
-d5rl info a1-walk-v0
-d5rl train bc a1-walk-v0 --offline-steps "${STEPS:-5000}" --seed 0 --run-dir runs/quickstart/bc \
+d5rl generate a1-walk-v1 --episodes "$EPISODES"     # the first 48 episodes of the full dataset
+d5rl info a1-walk-v1
+d5rl train bc a1-walk-v1 --offline-steps "${STEPS:-5000}" --seed 0 --run-dir runs/quickstart/bc \
   --set dataset_episodes="$EPISODES" --set eval_interval=5000 --set eval_episodes=5
 d5rl eval runs/quickstart/bc   # replays the run's final evaluation from its checkpoint: the same score
