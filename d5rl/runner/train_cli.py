@@ -126,12 +126,10 @@ def cmd_eval(args) -> int:
         processes=args.processes,
         video_path=args.video,
     )
-    final = (
-        RunDir(args.run_dir).read_summary() if (args.episodes, args.envs, args.seed, args.task) == (None,) * 4 else None
-    )
-    if final is not None and "score" in res and isinstance(final.get("score"), float):
-        res["final_evaluation_score"] = final["score"]  # what the run's own final evaluation scored
-    res.pop("returns", None)
+    if (args.episodes, args.envs, args.seed, args.task) == (None,) * 4:  # the run's own final evaluation
+        _compare_with_final(res, RunDir(args.run_dir).read_summary())
+    for per_episode in ("returns", "lengths", "scores"):
+        res.pop(per_episode, None)
     if args.json:
         print(json.dumps({"task_id": task, **res}, indent=2))
         return 0
@@ -143,13 +141,27 @@ def cmd_eval(args) -> int:
     for k, v in res.get("stats", {}).items():
         print(f"  {k}: {v:.2f}")
     if "final_evaluation_score" in res:
-        same = "the same" if res["final_evaluation_score"] == res["score"] else "not the same"
+        differ = res.get("episodes_not_the_same")
+        same = "the same" if res["final_evaluation_score"] == res["score"] and not differ else "not the same"
+        if differ:
+            same += f" (episode{'s' if len(differ) > 1 else ''} {', '.join(map(str, differ))} scored otherwise)"
         print(f"the run's final evaluation (summary.json) scored {res['final_evaluation_score']:.3f}: {same}")
     if "score" in res:
         print(f"normalized score: {res['score']:.3f} ± {res['score_std']:.3f}")
     else:
         print(f"mean return: {res['return']:.2f} (this task has no score reference)")
     return 0
+
+
+def _compare_with_final(res: dict, final: dict | None) -> None:
+    """Add to an evaluation's result what the run's final evaluation (its ``summary.json``) scored, and which
+    episodes scored otherwise (runs that recorded each episode's score)."""
+    if final is None or "score" not in res or not isinstance(final.get("score"), float):
+        return
+    res["final_evaluation_score"] = final["score"]
+    was = final.get("scores")
+    if isinstance(was, list) and len(was) == len(res["scores"]):
+        res["episodes_not_the_same"] = [i + 1 for i, (a, b) in enumerate(zip(was, res["scores"])) if a != b]
 
 
 def _check_same_spaces(trained_on: str, task: str) -> None:

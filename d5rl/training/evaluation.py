@@ -45,9 +45,9 @@ def evaluate(
     env_fn: Callable[[], gym.Env] | None = None,
     progress: EvalProgress | None = None,
 ) -> dict[str, Any]:
-    """Mean return, normalized score (if the task has references), success and length over episodes;
-    ``stats``: the mean over episodes of each value of the final ``info["episode_stats"]``, where the
-    task reports some (the kitchen: which subtasks were done).
+    """Mean return, normalized score (if the task has references), success and length over episodes, and
+    each episode's (``returns``, ``lengths``, ``scores``); ``stats``: the mean over episodes of each value of
+    the final ``info["episode_stats"]``, where the task reports some (the kitchen: which subtasks were done).
 
     ``num_envs`` environments step in lockstep and the agent acts on all of them in
     one batch; ``processes=True`` puts each in its own process (gymnasium
@@ -135,6 +135,7 @@ def _summary(task_id: str, episodes: list[dict], *, scored: bool) -> dict[str, A
         "success": float(np.mean([e["success"] for e in episodes])),
         "episodes": len(episodes),
         "returns": returns,
+        "lengths": [int(e["length"]) for e in episodes],
     }
     stats = [e["info"].get("episode_stats") or {} for e in episodes]
     if any(stats):
@@ -144,6 +145,7 @@ def _summary(task_id: str, episodes: list[dict], *, scored: bool) -> dict[str, A
         scores = np.asarray([scorer(e["return"], e["info"]) for e in episodes], np.float64)
         out["score"] = float(scores.mean())
         out["score_std"] = float(scores.std())
+        out["scores"] = scores.tolist()
     return out
 
 

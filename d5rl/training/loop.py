@@ -173,7 +173,7 @@ def _train_locked(spec: RunSpec, agent_cls, agent_cfg, sampler, example, run_dir
         summary = {
             "step": state.step,
             "run_dir": str(run_dir),
-            **{k: v for k, v in final.items() if k != "returns"},
+            **final,  # with each episode's return, length and score: a published mean can be checked episode by episode
             "run_wall_s": round(state.elapsed(), 1),
             "resumed": resume is not None,
         }

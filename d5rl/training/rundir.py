@@ -10,7 +10,7 @@ grid's runner adds its own files::
                            before; .checkpoint.tmp-<pid>/ one being written
       metrics.jsonl        one row per log or evaluation step; metrics.csv the same rows; tb/ TensorBoard events
       eval_progress.json   the finished episodes of an unfinished evaluation
-      summary.json         the final evaluation
+      summary.json         the final evaluation: means and each episode's return, length and score
       videos/              evaluation videos (``save_video=True``)
       .train.lock          held by the process training into the directory
     written by the grid's runner (d5rl.runner):

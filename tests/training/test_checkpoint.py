@@ -321,13 +321,24 @@ def test_eval_by_default_reproduces_the_runs_final_evaluation(tmp_path, capsys):
     overrides = SMALL + ["final_eval_episodes=4", "eval_envs=3"]
     train(resolve("bc", "toy-reach-v0", overrides, offline_steps=16, seed=2), run, dataset=toy_dataset(10))
     summary = json.loads((run / "summary.json").read_text())
+    # each episode's return, length and score is kept, so the mean can be checked episode by episode
+    assert len(summary["returns"]) == len(summary["lengths"]) == len(summary["scores"]) == 4
+    assert np.mean(summary["scores"]) == pytest.approx(summary["score"], rel=1e-12)
+    assert np.mean(summary["lengths"]) == summary["length"] and all(isinstance(n, int) for n in summary["lengths"])
     assert main(["eval", str(run), "--json"]) == 0
     out = json.loads(capsys.readouterr().out)
     assert out["episodes"] == 4 and out["score"] == summary["score"] == out["final_evaluation_score"]
+    assert out["episodes_not_the_same"] == [] and "scores" not in out
     assert main(["eval", str(run)]) == 0
     lines = capsys.readouterr().out.splitlines()
     assert lines[-2] == f"the run's final evaluation (summary.json) scored {summary['score']:.3f}: the same"
     assert lines[-1].startswith(f"normalized score: {summary['score']:.3f} ± ")
+    # an episode that scored otherwise is named
+    (run / "summary.json").write_text(
+        json.dumps({**summary, "scores": [*summary["scores"][:2], -1.0, summary["scores"][3]]})
+    )
+    assert main(["eval", str(run)]) == 0
+    assert capsys.readouterr().out.splitlines()[-2].endswith(": not the same (episode 3 scored otherwise)")
     assert main(["eval", str(run), "--seed", "7", "--json"]) == 0
     other = json.loads(capsys.readouterr().out)
     assert "final_evaluation_score" not in other and other["score"] != summary["score"]
