@@ -56,9 +56,9 @@ def evaluate(
     on ``num_envs``.  The policy's arithmetic does, in the last bit, at one row: for each of the ten
     agents a row's action has the same bits in batches of 2 to 10 rows, while a batch of one row (XLA's
     matrix-vector product) differs, for nine of them, by 1e-7 to 1e-5 (``num_envs=1``, or the last
-    episode of a round still running alone); on a task whose episodes all start alike (A1 walk and run) that can change the
-    rollout (docs/experiments/a1-updates).  ``video_path``
-    records the first episode.  ``progress`` keeps the finished episodes on disk, so that an
+    episode of a round still running alone); on a task whose episodes all start alike (A1 walk and
+    run) that can change the rollout (docs/experiments/a1-updates).  ``video_path`` records the first
+    episode.  ``progress`` keeps the finished episodes on disk, so that an
     evaluation killed midway resumes at its first unfinished episode with the same result (see
     :class:`EvalProgress`).
     """
