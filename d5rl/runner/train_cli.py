@@ -12,7 +12,7 @@ from d5rl.agents.config import ConfigError
 from d5rl.errors import D5RLError
 from d5rl.registry import get_spec, make_env
 from d5rl.settings import run_steps
-from d5rl.training.config import check_run
+from d5rl.training.config import check_run, final_eval_episodes
 
 
 def add_train_parser(subparsers) -> argparse.ArgumentParser:
@@ -114,7 +114,7 @@ def cmd_eval(args) -> int:
         _check_same_spaces(resolved["task_id"], task)
     train = resolved["train"]
     # the defaults are the run's final evaluation: on the run's own task they reproduce its summary.json
-    episodes = args.episodes or train["final_eval_episodes"] or train["eval_episodes"]
+    episodes = args.episodes or final_eval_episodes(train)
     seed = evaluation_seed(resolved["seed"]) if args.seed is None else args.seed
     res = evaluate(
         agent,

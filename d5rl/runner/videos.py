@@ -21,6 +21,7 @@ import numpy as np
 
 from d5rl.rollout import Step, rollout
 from d5rl.runner.results import METHODS, method_name
+from d5rl.training.config import final_eval_episodes
 from d5rl.training.envs import episode_scorer, make_task_env
 from d5rl.training.rundir import RunDir
 from d5rl.video import FrameRenderer, write_gif
@@ -73,12 +74,13 @@ def typical_rollout(cell_dir: Path, task: str, *, size=GIF_SIZE, every: int = EV
     saved in ``cell_dir``: the first ``eval_envs`` of its episodes, replayed beside each other as they ran, so
     the episode shown is one the cell's published score averages.  ``(frames, frames per second, the episode's
     index in the evaluation, every episode's score)``."""
+    from d5rl.training.evaluation import batch_width
     from d5rl.training.loop import load_run  # JAX (the train extra): loaded by the commands that need it
     from d5rl.training.parts import evaluation_seed
 
     agent, resolved = load_run(cell_dir)
     train = resolved["train"]
-    width = max(1, min(int(train["eval_envs"]), int(train["final_eval_episodes"] or train["eval_episodes"])))
+    width = batch_width(train["eval_envs"], final_eval_episodes(train))  # the final evaluation's first round
     seed = evaluation_seed(resolved["seed"])
     # envs without a MuJoCo camera (toy) are filmed through render(), which needs a render mode as in Gymnasium
     envs = [make_task_env(task, train["frame_stack"], render_mode="rgb_array") for _ in range(width)]

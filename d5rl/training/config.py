@@ -90,6 +90,11 @@ class RunSpec:
         }
 
 
+def final_eval_episodes(train: Mapping) -> int:
+    """How many episodes the evaluation at the end of a run with these loop settings has."""
+    return int(train["final_eval_episodes"] or train["eval_episodes"])
+
+
 def check_run(offline_steps, online_steps, seed) -> None:
     """One-line errors for step counts and seeds that cannot make a run."""
     for name, v in (("--offline-steps", offline_steps), ("--online-steps", online_steps), ("--seed", seed)):

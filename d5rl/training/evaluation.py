@@ -68,7 +68,7 @@ def evaluate(
         raise D5RLError(f"the evaluation seed must be a non-negative integer, got {seed!r}", "pass e.g. --seed 0")
     if video_path is not None:
         video_path = check_video_path(video_path)
-    num_envs = max(1, min(int(num_envs), int(num_episodes)))
+    num_envs = batch_width(num_envs, num_episodes)
     evaluation = {
         "task_id": task_id,
         "seed": int(seed),
@@ -104,6 +104,11 @@ def evaluate(
     if progress is not None:
         progress.clear()
     return out
+
+
+def batch_width(num_envs: int, num_episodes: int) -> int:
+    """How many episodes an evaluation steps together: ``num_envs``, at most one per episode."""
+    return max(1, min(int(num_envs), int(num_episodes)))
 
 
 def episode_seeds(seed: int, first: int, count: int) -> list[int]:

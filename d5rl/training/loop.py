@@ -29,7 +29,7 @@ from d5rl.datasets.generation import RESULT_IDENTITY_KEYS, result_identity
 from d5rl.files import lock_holder, try_lock
 from d5rl.progress import progress_bar
 from d5rl.training.checkpoint import Checkpoint, check_state, load_checkpoint, restore_agent, save_checkpoint
-from d5rl.training.config import RunSpec, check_run
+from d5rl.training.config import RunSpec, check_run, final_eval_episodes
 from d5rl.training.envs import load_task_dataset, make_task_env
 from d5rl.training.logger import Logger
 from d5rl.training.memory import check_memory
@@ -169,7 +169,7 @@ def _train_locked(spec: RunSpec, agent_cls, agent_cfg, sampler, example, run_dir
             return {**finished, "agent": agent}
         agent = offline_phase(run, agent, state)
         agent = online_phase(run, agent, state)
-        final = run.evaluate(agent, state, cfg.final_eval_episodes or cfg.eval_episodes)
+        final = run.evaluate(agent, state, final_eval_episodes(cfg))
         summary = {
             "step": state.step,
             "run_dir": str(run_dir),
