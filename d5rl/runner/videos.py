@@ -74,7 +74,7 @@ def typical_rollout(cell_dir: Path, task: str, *, size=GIF_SIZE, every: int = EV
     saved in ``cell_dir``: the first ``eval_envs`` of its episodes, replayed beside each other as they ran, so
     the episode shown is one the cell's published score averages.  ``(frames, frames per second, the episode's
     index in the evaluation, every episode's score)``."""
-    from d5rl.training.evaluation import batch_width
+    from d5rl.training.evaluation import batch_width  # JAX (the train extra)
     from d5rl.training.loop import load_run  # JAX (the train extra): loaded by the commands that need it
     from d5rl.training.parts import evaluation_seed
 
