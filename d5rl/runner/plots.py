@@ -8,7 +8,8 @@ from d5rl.runner.results import CellResult, mean_curves, method_name
 
 
 def plot_curves(results: list[CellResult], out_dir: Path) -> list[Path]:
-    """One PNG per task: normalized score against gradient steps, mean ± std over seeds per method."""
+    """One PNG per task: normalized score against gradient steps, mean ± std over seeds per method; the PNGs
+    of tasks without evaluated cells are deleted."""
     try:
         import matplotlib  # optional (pip install matplotlib): the report says when it is missing
 
@@ -40,4 +41,6 @@ def plot_curves(results: list[CellResult], out_dir: Path) -> list[Path]:
         fig.savefig(path)
         plt.close(fig)
         paths.append(path)
+    for old in set(out_dir.glob("*.png")) - set(paths):  # a task whose cells were taken out of the grid
+        old.unlink()
     return paths

@@ -56,7 +56,7 @@ from d5rl.runner.tables import (
     table_csv,
     table_markdown,
 )
-from d5rl.runner.videos import GIFS, read_captions
+from d5rl.runner.videos import GIFS, drop_rollouts, read_captions
 from d5rl.training.rundir import RunDir
 
 
@@ -111,6 +111,7 @@ def write_report(
         from d5rl.runner.videos import write_rollout_gifs  # JAX (the train extra): only for --videos
 
         write_rollout_gifs([r for r in results if r.task in filmed], out)
+    drop_rollouts(out / GIFS, {r.task for r in results})
     parts += _rollouts(out) + _caveats(results) + _stale(results) + _unfinished(results, out) + _videos(results, out)
     path = out / "report.md"
     path.write_text("\n".join(parts))

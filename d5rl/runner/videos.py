@@ -140,6 +140,21 @@ def read_captions(videos: Path) -> dict[str, str]:
         return {}
 
 
+def drop_rollouts(videos: Path, tasks) -> list[str]:
+    """Delete the GIFs (and captions) of tasks no longer in the grid (their cells were removed), so the report
+    shows only tasks it has results for; returns the tasks dropped."""
+    captions = read_captions(videos)
+    gone = sorted({*captions, *(p.stem for p in videos.glob("*.gif"))} - set(tasks))
+    for task in gone:
+        (videos / f"{task}.gif").unlink(missing_ok=True)
+        captions.pop(task, None)
+    if gone and captions:
+        _write_captions(videos, captions)
+    elif gone:
+        (videos / "captions.json").unlink(missing_ok=True)
+    return gone
+
+
 def _write_captions(videos: Path, captions: dict[str, str]) -> None:
     if captions:
         videos.mkdir(parents=True, exist_ok=True)

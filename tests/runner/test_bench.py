@@ -93,7 +93,10 @@ def _read_eval(path):
 
 def test_report_numbers_match_the_logs(finished_run, tmp_path):
     run_dir, _, _ = finished_run
+    (tmp_path / "report" / "curves").mkdir(parents=True)
+    (tmp_path / "report" / "curves" / "toy-gone-v0.png").write_bytes(b"")  # a task taken out of the grid
     report = write_report(run_dir, tmp_path / "report", reps=500)
+    assert not (tmp_path / "report" / "curves" / "toy-gone-v0.png").exists()
     # recompute every table entry from the cells' eval.csv files, independently of d5rl.runner.logs
     finals = {"offline": {}, "online": {}}
     for task in TASKS:

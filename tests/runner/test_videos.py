@@ -56,6 +56,13 @@ def test_report_renders_the_median_episode_of_the_best_cells_final_evaluation(tm
     assert gif.read_bytes() == before
     with pytest.raises(ReportError, match="no cells of toy-other-v0 under .*name tasks of the grid: toy-reach-v0"):
         write_report(tmp_path, reps=20, plots=False, videos=["toy-other-v0"])
+    # a task whose cells were taken out of the grid loses its GIF and caption; the others stay
+    videos = tmp_path / "report" / "videos"
+    (videos / "toy-gone-v0.gif").write_bytes(before)
+    (videos / "captions.json").write_text(json.dumps({**captions, "toy-gone-v0": "BC seed 0"}))
+    report = write_report(tmp_path, reps=20, plots=False).read_text()
+    assert not (videos / "toy-gone-v0.gif").exists() and "toy-gone-v0" not in report
+    assert json.loads((videos / "captions.json").read_text()) == captions and gif.read_bytes() == before
     frames = imageio.mimread(str(gif))
     assert len(frames) >= 2 and np.asarray(frames[0]).shape[-1] == 3  # (the GIF writer merges repeated frames)
 
