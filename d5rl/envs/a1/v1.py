@@ -318,12 +318,13 @@ class A1EnvV1(A1State, MujocoEnv):
     def _obs(self) -> np.ndarray:
         return self.observation(self.task.heading_error(self) if self.task.directed else None)
 
-    def _place_robot(self, x: float, y: float) -> None:
-        """Nominal pose, level, at rest, at the lowest height on the release's 1 cm grid where nothing touches."""
+    def _place_robot(self, x: float, y: float, joints=NOMINAL_POSE) -> None:
+        """The joints at ``joints`` (the nominal pose), level, at rest, at the lowest height on the release's 1 cm
+        grid where nothing touches."""
         mujoco.mj_resetData(self.model, self.data)
-        self.data.qpos[self.idx.qpos_joints] = NOMINAL_POSE
+        self.data.qpos[self.idx.qpos_joints] = joints
         self.data.qpos[:7] = [x, y, START_Z, 1.0, 0.0, 0.0, 0.0]
-        self.data.ctrl[:] = NOMINAL_POSE  # zero torque at rest
+        self.data.ctrl[:] = joints  # zero torque at rest
         for _ in range(1000):
             mujoco.mj_forward(self.model, self.data)
             if self.data.ncon == 0:

@@ -4,7 +4,8 @@ On `a1-walk-v1` / `a1-run-v1` every episode starts from the same pose (the relea
 deterministic agent's evaluation episodes are one rollout.  This evaluates a cell's final checkpoint as its
 final evaluation did (same evaluation seed, five episodes at a time) and then again with each episode's
 start perturbed: every joint angle moved by a uniform draw in ±NOISE rad (seeded by the episode's reset
-seed), the trunk at the release's first contact-free height on its 1 cm grid.  NOISE 0 must reproduce the
+seed), placed as the env places its start (`A1EnvV1._place_robot`: the trunk at the release's first
+contact-free height on its 1 cm grid).  NOISE 0 must reproduce the
 cell's published score (the control column).
 
     python docs/experiments/a1-updates/perturbed_starts.py CELL_DIR [CELL_DIR ...] [--noise 0.01] [--episodes 20]
@@ -20,10 +21,9 @@ import json
 from pathlib import Path
 
 import gymnasium as gym
-import mujoco
 import numpy as np
 
-from d5rl.envs.a1.v1 import START_DZ, START_Z
+from d5rl.envs.a1.model import NOMINAL_POSE
 from d5rl.training.envs import episode_scorer, make_task_env
 from d5rl.training.evaluation import evaluate
 from d5rl.training.loop import load_run
@@ -41,16 +41,8 @@ class PerturbedStart(gym.Wrapper):
         obs, info = self.env.reset(seed=seed, options=options)
         if self.noise > 0:
             a1 = self.env.unwrapped
-            joints = a1.data.qpos[a1.idx.qpos_joints] + np.random.default_rng([seed, 2718]).uniform(
-                -self.noise, self.noise, 12
-            )
-            a1.data.qpos[a1.idx.qpos_joints] = joints
-            a1.data.ctrl[:] = joints  # at rest in the new pose: no torque
-            a1.data.qpos[2] = START_Z  # the release's lowest start height, raised by 1 cm until nothing touches
-            mujoco.mj_forward(a1.model, a1.data)
-            while a1.data.ncon:
-                a1.data.qpos[2] += START_DZ
-                mujoco.mj_forward(a1.model, a1.data)
+            rng = np.random.default_rng([seed, 2718])
+            a1._place_robot(*a1.task.start_xy(), NOMINAL_POSE + rng.uniform(-self.noise, self.noise, 12))
             obs = a1._obs()
         return obs, info
 
