@@ -10,7 +10,7 @@ from pathlib import Path
 from d5rl.browse.catalog import json_floats
 from d5rl.runner import results as grid
 from d5rl.runner import tables as render
-from d5rl.runner.paper import paper_result, paper_task
+from d5rl.runner.paper import paper_repeats, paper_result, paper_task, repeat_text
 
 
 def run_labels(run_dirs: list[Path]) -> list[str]:
@@ -62,7 +62,8 @@ def comparison_rows(results: list[grid.CellResult], phase: str) -> list[dict]:
                 "steps": render.steps_label(cells),
                 "paper_task": paper_task(task),
                 "paper": None if paper is None else list(paper),
-                "paper_text": render.paper_entry(paper),
+                "paper_text": render.paper_entry(paper)
+                + "".join(f" († also {repeat_text(w)})" for w in paper_repeats(task, algo, phase)),
             }
         )
     return rows

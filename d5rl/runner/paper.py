@@ -3,6 +3,8 @@
 Transcribed from the paper's LaTeX source (``../shared/seed``): mean and ± over its seeds, 500k
 gradient steps (Table 2: 500k offline then 500k online), its own datasets and score references.
 ``None`` for the ± where the paper prints a bare number; an entry absent where it prints "-".
+:func:`paper_repeats` finds the entries the paper prints twice, digit for digit (e.g. TD3+BC's and
+RLPD's on A1 run), which the comparison tables mark.
 Kitchen and WidowX in the paper are camera tasks; our ``-state`` twins compare against the same
 row (see :func:`paper_task`), which the report says next to the table.
 """
@@ -13,6 +15,7 @@ import re
 
 from d5rl.errors import D5RLError
 from d5rl.registry import base_task
+from d5rl.runner.results import method_name
 
 _VERSION = re.compile(r"-v\d+$")
 
@@ -210,3 +213,25 @@ def paper_result(task: str, algo: str, phase: str) -> tuple[float, float | None]
 def paper_methods(task: str, phase: str) -> set[str]:
     """The methods the paper reports for ``task`` in ``phase``."""
     return set(PAPER.get(phase, {}).get(paper_task(task), {}))
+
+
+def paper_repeats(task: str, algo: str, phase: str) -> list[str]:
+    """Where else the paper prints this entry's exact mean and ±: the other methods of the same row that
+    share it, and, for a Table 2 entry, ``"offline"`` where it equals the same method's Table 1 entry.
+
+    Zero entries (0.0 ± 0.0) and bare numbers are left out: agreeing there says nothing.  Two methods
+    sharing a nonzero mean and ± to three decimals is unlikely by chance, so one of them is likely a
+    transcription error; a Table 2 entry equal to Table 1's shows no change from online fine-tuning."""
+    mine = paper_result(task, algo, phase)
+    if mine is None or mine[1] is None or mine == (0.0, 0.0):
+        return []
+    row = PAPER.get(phase, {}).get(paper_task(task), {})
+    out = [a for a, v in row.items() if a != algo and v == mine]
+    if phase == "online" and paper_result(task, algo, "offline") == mine:
+        out.append("offline")
+    return out
+
+
+def repeat_text(where: str) -> str:
+    """One place of :func:`paper_repeats` in words: "RLPD's on this row", "its Table 1 entry"."""
+    return "its Table 1 entry" if where == "offline" else f"{method_name(where)}'s on this row"

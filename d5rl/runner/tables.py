@@ -9,7 +9,7 @@ import io
 
 import numpy as np
 
-from d5rl.runner.paper import paper_methods, paper_result, paper_task, same_task
+from d5rl.runner.paper import paper_methods, paper_repeats, paper_result, paper_task, same_task
 from d5rl.runner.results import (
     CellResult,
     behaviour_table,
@@ -112,8 +112,14 @@ def comparison_markdown(table: dict, phase: str, title: str, tasks=()) -> str | 
         return None
     seeds = _most_seeds(rows)
 
+    repeats = {}  # the paper's entries it prints twice: marked, and listed under the table
+
     def cell(task, a, e):
-        return f"{_entry(e, seeds)} / {paper_entry(paper_result(task, a, phase))}"
+        mark = ""
+        if twice := paper_repeats(task, a, phase):
+            repeats[(paper_task(task), a)] = twice
+            mark = "†"
+        return f"{_entry(e, seeds)} / {paper_entry(paper_result(task, a, phase))}{mark}"
 
     def label(task):
         if not paper_methods(task, phase):
@@ -130,7 +136,38 @@ def comparison_markdown(table: dict, phase: str, title: str, tasks=()) -> str | 
         * any(paper_task(t) != t and same_task(paper_task(t), t) for _, t, _ in rows),
         "",
     ]
-    return "\n".join(intro + _grid_markdown(algos, rows, cell, label)) + "\n"
+    lines = _grid_markdown(algos, rows, cell, label)
+    if repeats:
+        lines += ["", _repeat_footnote(repeats)]
+    return "\n".join(intro + lines) + "\n"
+
+
+def _repeat_footnote(repeats: dict) -> str:
+    """The note under a comparison table on the paper's entries marked †, ``{(paper task, algo): where
+    else the paper prints them}`` (:func:`d5rl.runner.paper.paper_repeats`)."""
+    shared, as_offline = {}, {}
+    for (task, a), where in sorted(repeats.items()):
+        if "offline" in where:
+            as_offline.setdefault(method_name(a), []).append(task)
+        others = [w for w in where if w != "offline"]
+        if others:
+            methods = " and ".join(method_name(m) for m in method_order({a, *others}))
+            shared.setdefault(methods, []).append(task)
+
+    def listed(names):
+        names = list(dict.fromkeys(names))
+        return names[0] if len(names) == 1 else ", ".join(names[:-1]) + " and " + names[-1]
+
+    parts = [
+        f"The paper's {methods} entries on {listed(tasks)} are the same, mean and ± to three decimals: likely a "
+        "transcription error in the paper, so compare with care."
+        for methods, tasks in shared.items()
+    ] + [
+        f"The paper's Table 2 {m} entries on {listed(tasks)} are its Table 1 entries: it reports no change from "
+        "online fine-tuning."
+        for m, tasks in as_offline.items()
+    ]
+    return "† " + " ".join(parts)
 
 
 def _data_label(data: dict | None) -> str:

@@ -147,6 +147,21 @@ def test_frames_replayed_in_the_env_without_a_family_renderer():
     np.testing.assert_array_equal(tiles(png, body["cameras"][0]), np.stack([toy.frame(s, 12) for s in states]))
 
 
+def test_the_papers_repeated_entries_are_marked(tmp_path):
+    """The paper prints TD3+BC's A1 run entry for RLPD too; the runs table says so beside it."""
+    from d5rl.browse.runs import comparison_rows
+    from d5rl.runner.results import collect
+
+    for algo in ("td3bc", "bc"):
+        cell = Cell("a1-run-v1", algo, 0, 100, 0)
+        d = cell.directory(tmp_path)
+        RunDir(d).write_cell(cell.to_json())
+        (d / "metrics.jsonl").write_text(json.dumps({"step": 100, "eval/a1-run-v1/score": 0.5}) + "\n")
+        (d / "done").write_text("{}")
+    rows = {r["algo"]: r["paper_text"] for r in comparison_rows(collect(tmp_path), "offline")}
+    assert rows == {"td3bc": "0.002 ± 0.021 († also RLPD's on this row)", "bc": "0.684 ± 0.026"}
+
+
 def _run_dir(root: Path) -> Path:
     for seed, scores in ((0, [0.1, 0.5]), (1, [0.3, 0.7])):
         cell = Cell("toy-reach-v0", "bc", seed, 100, 0)

@@ -114,6 +114,33 @@ def test_a_state_twin_is_compared_with_its_camera_task():
     assert paper_result("toy-reach-v0", "bc", "offline") is None
 
 
+def test_the_papers_repeated_entries():
+    """Entries the paper prints twice, mean and ±: TD3+BC's and RLPD's on A1 run and hiking (Table 1), and
+    the Table 2 entries equal to their Table 1 entries (CQL on A1; CalQL, TD3+BC and IDQL on the kitchens)."""
+    from d5rl.runner.paper import PAPER, paper_repeats
+
+    assert paper_repeats("a1-run-v1", "td3bc", "offline") == ["rlpd"]
+    assert paper_repeats("a1-hiking-v1", "rlpd", "offline") == ["td3bc"]
+    assert paper_repeats("a1-walk-v1", "td3bc", "offline") == []  # 0.549 ± 0.178: its own
+    assert paper_repeats("kitchen-standard-mixed-state-v0", "cql", "offline") == []  # 0.0 ± 0.0 says nothing
+    assert paper_repeats("a1-walk-v1", "cql", "online") == ["offline"]
+    assert paper_repeats("a1-walk-v1", "cql", "offline") == []  # the repeat is Table 2's
+    assert paper_repeats("a1-walk-v1", "iql", "online") == []
+    within = {(task, a) for task, row in PAPER["offline"].items() for a in row if paper_repeats(task, a, "offline")}
+    assert within == {(t, a) for t in ("a1-run-v0", "a1-hiking-v0") for a in ("td3bc", "rlpd")}
+    assert sum(bool(paper_repeats(t, a, "online")) for t, row in PAPER["online"].items() for a in row) == 14
+
+
+def test_the_comparison_marks_the_papers_repeated_entries(tmp_path):
+    _fake_run(tmp_path, np.random.default_rng(0))
+    write_report(tmp_path, reps=50, plots=False)
+    md = (tmp_path / "report" / "table1_offline_vs_paper.md").read_text()
+    run_row = next(line for line in md.splitlines() if "| a1-run-v0 |" in line)
+    assert "/ 0.002 ± 0.021† |" in run_row and "/ 0.684 ± 0.026 |" in run_row  # TD3+BC marked, BC not
+    assert "† The paper's TD3+BC and RLPD entries on a1-run-v0 are the same, mean and ±" in md
+    assert "a1-walk-v0" not in md.split("†")[-1]
+
+
 def test_wall_time_counts_every_process(tmp_path):
     """A cell's wall time is its run's summed over the processes that ran it; for older runs that only know the
     last process's, the protocol table says it is a lower bound."""
