@@ -145,18 +145,19 @@ def comparison_markdown(table: dict, phase: str, title: str, tasks=()) -> str | 
 def _repeat_footnote(repeats: dict) -> str:
     """The note under a comparison table on the paper's entries marked †, ``{(paper task, algo): where
     else the paper prints them}`` (:func:`d5rl.runner.paper.paper_repeats`)."""
+
+    def listed(names):
+        names = list(dict.fromkeys(names))
+        return names[0] if len(names) == 1 else ", ".join(names[:-1]) + " and " + names[-1]
+
     shared, as_offline = {}, {}
     for (task, a), where in sorted(repeats.items()):
         if "offline" in where:
             as_offline.setdefault(method_name(a), []).append(task)
         others = [w for w in where if w != "offline"]
         if others:
-            methods = " and ".join(method_name(m) for m in method_order({a, *others}))
+            methods = listed([method_name(m) for m in method_order({a, *others})])
             shared.setdefault(methods, []).append(task)
-
-    def listed(names):
-        names = list(dict.fromkeys(names))
-        return names[0] if len(names) == 1 else ", ".join(names[:-1]) + " and " + names[-1]
 
     parts = [
         f"The paper's {methods} entries on {listed(tasks)} are the same, mean and ± to three decimals: likely a "
