@@ -8,7 +8,7 @@ from pathlib import Path
 import pytest
 
 import d5rl
-from tests.mdtables import entries, report_entries, tables
+from tests.mdtables import agrees, doc_tables, entries
 
 ROOT = Path(__file__).resolve().parents[1]
 README = (ROOT / "README.md").read_text()
@@ -63,49 +63,27 @@ def run_python(code: str, tmp_path: Path) -> None:
 
 
 # --- published results: the docs' result tables are copies of the reports' -----------------------------------
-PAGES = [ROOT / "README.md", *sorted((ROOT / "docs").glob("*.md"))]  # the front page and the docs pages
-GRIDS = ROOT / "docs" / "results"
-LINK = re.compile(r"\]\(([^)\s#]+)[^)]*\)")
-
-
-def _grid_before(page: Path, text: str, start: int) -> str | None:
-    """The grid (``docs/results/<grid>/``) of the last link above ``start`` that leads into one."""
-    grid = None
-    for target in LINK.findall(text[:start]):
-        path = (page.parent / target).resolve()
-        if path.is_relative_to(GRIDS) and path != GRIDS:
-            grid = path.relative_to(GRIDS).parts[0]
-    return grid
-
-
 def test_result_tables_match_their_reports():
     """Each table of scores on the front page and the docs pages is the entries of the grid report it follows
     (the last ``docs/results/<grid>/`` linked above it), number for number: a hand-copied table cannot drift
     from ``d5rl report``'s output.  An entry may add a remark after the number (``(n=1)``).  Every published
     grid has a table checked this way, and the front page carries the headline one."""
-    from d5rl.runner.results import METHODS
-
     checked: dict[str, int] = {}
-    for page in PAGES:
-        text = page.read_text()
-        for start, header, rows in tables(text):
-            if not set(header) & set(METHODS.values()):
-                continue
-            name = page.relative_to(ROOT)
-            grid = _grid_before(page, text, start)
-            assert grid, f"{name}: the table with columns {header} follows no link into docs/results/<grid>/"
-            ours = {}
-            for path in sorted((GRIDS / grid).glob("*_vs_paper.md")):
-                ours.update(report_entries(path.read_text()))
-            mine = entries(header, rows)
-            assert mine, f"{name}: no (task, method) entries read from the table {header}"
-            for key, cell in mine.items():
-                assert key in ours, f"{name} ({grid}): {key} is not in docs/results/{grid}/*_vs_paper.md"
-                assert cell == ours[key] or cell.startswith(ours[key] + " "), (
-                    f"{name} ({grid}) {key}: {cell!r}, its report says {ours[key]!r}"
-                )
-                checked[str(name)] = checked.get(str(name), 0) + 1
-                checked[grid] = checked.get(grid, 0) + 1
+    for table in doc_tables(ROOT):
+        name = table.page.relative_to(ROOT)
+        assert table.grid, f"{name}: the table with columns {table.header} follows no link into docs/results/<grid>/"
+        mine = entries(table.header, table.rows)
+        assert mine, f"{name}: no (task, method) entries read from the table {table.header}"
+        for key, cell in mine.items():
+            assert key in table.reported, (
+                f"{name} ({table.grid}): {key} is not in docs/results/{table.grid}/*_vs_paper.md"
+            )
+            assert agrees(cell, table.reported[key]), (
+                f"{name} ({table.grid}) {key}: {cell!r}, its report says {table.reported[key]!r} "
+                "(`python -m tests.mdtables` copies the reports' entries)"
+            )
+            checked[str(name)] = checked.get(str(name), 0) + 1
+            checked[table.grid] = checked.get(table.grid, 0) + 1
     assert checked.get("README.md", 0) >= 50, f"only {checked.get('README.md', 0)} front-page entries were checked"
-    published = {p.parent.name for p in GRIDS.glob("*/cells")}
+    published = {p.parent.name for p in (ROOT / "docs" / "results").glob("*/cells")}
     assert published and all(checked.get(g) for g in published), f"grids without a table: {published - set(checked)}"
