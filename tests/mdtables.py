@@ -92,6 +92,7 @@ def doc_tables(root: Path = ROOT) -> list[DocTable]:
     from d5rl.runner.results import METHODS
 
     grids = (root / "docs" / "results").resolve()
+    reports: dict[str | None, dict[tuple[str, str], str]] = {None: {}}  # each grid's reports read once
     out = []
     for page in pages(root):
         text = page.read_text()
@@ -99,10 +100,11 @@ def doc_tables(root: Path = ROOT) -> list[DocTable]:
             if not set(header) & set(METHODS.values()):
                 continue
             grid = grid_before(page.resolve(), text, start, grids)
-            reported: dict[tuple[str, str], str] = {}
-            for path in sorted((grids / grid).glob("*_vs_paper.md")) if grid else []:
-                reported.update(report_entries(path.read_text()))
-            out.append(DocTable(page, start, header, rows, grid, reported))
+            if grid not in reports:
+                reports[grid] = {}
+                for path in sorted((grids / grid).glob("*_vs_paper.md")):
+                    reports[grid].update(report_entries(path.read_text()))
+            out.append(DocTable(page, start, header, rows, grid, reports[grid]))
     return out
 
 
