@@ -56,7 +56,7 @@ from d5rl.runner.tables import (
     table_csv,
     table_markdown,
 )
-from d5rl.runner.videos import GIFS, drop_rollouts, read_captions
+from d5rl.runner.videos import GIFS, caption_note, drop_rollouts, read_captions
 from d5rl.training.rundir import RunDir
 
 
@@ -112,7 +112,13 @@ def write_report(
 
         write_rollout_gifs([r for r in results if r.task in filmed], out)
     drop_rollouts(out / GIFS, {r.task for r in results})
-    parts += _rollouts(out) + _caveats(results) + _stale(results) + _unfinished(results, out) + _videos(results, out)
+    parts += (
+        _rollouts(out, results)
+        + _caveats(results)
+        + _stale(results)
+        + _unfinished(results, out)
+        + _videos(results, out)
+    )
     path = out / "report.md"
     path.write_text("\n".join(parts))
     return path
@@ -183,8 +189,9 @@ def _filmed(results: list[CellResult], videos: bool | Collection[str], run_dir: 
     return set(videos)
 
 
-def _rollouts(out: Path) -> list[str]:
-    """The rollout GIFs in the report's folder (``--videos`` now or earlier), with their captions."""
+def _rollouts(out: Path, results: list[CellResult]) -> list[str]:
+    """The rollout GIFs in the report's folder (``--videos`` now or earlier), with their captions, each marked
+    where the grid's results have moved on since it was made (:func:`d5rl.runner.videos.caption_note`)."""
     gifs = {t: c for t, c in sorted(read_captions(out / GIFS).items()) if (out / GIFS / f"{t}.gif").exists()}
     if not gifs:
         return []
@@ -195,6 +202,8 @@ def _rollouts(out: Path) -> list[str]:
         "",
     ]
     for task, caption in gifs.items():
+        note = caption_note(results, task, caption)
+        caption = f"{caption} (**{note}**)" if note else caption
         parts += [f"**{task}**: {caption}", "", f"![{task}]({GIFS}/{task}.gif)", ""]
     return parts
 

@@ -126,6 +126,21 @@ def write_rollout_gifs(results, out_dir: Path, log=print) -> dict[str, str]:
     return captions
 
 
+def caption_note(results, task: str, caption: str) -> str:
+    """What a GIF's caption no longer says truly, given the grid's results now (empty when it holds): the cell
+    it names was trained again or went stale since (its label, with its final score, matches no current
+    cell), or a better cell has finished since, on a machine other than the one that made the GIF."""
+    labels = [_cell_label(c) for c in ranked_cells(results, task)]
+    if labels and caption.startswith(labels[0] + ";"):
+        return ""
+    if any(caption.startswith(label + ";") for label in labels):
+        return f"the task's best cell is now {labels[0]}; `d5rl report --videos` where its checkpoint is films it"
+    return (
+        "made from an earlier training of this cell, not its current result; `d5rl report --videos` where "
+        "the task's best cell's checkpoint is films it again"
+    )
+
+
 def _cell_label(cell) -> str:
     """How a caption names its cell: method, seed and final score (a cell trained again scores anew)."""
     final = cell.final.get("online", cell.final.get("offline"))

@@ -79,3 +79,19 @@ def test_report_renders_the_median_episode_of_the_best_cells_final_evaluation(tm
         shutil.rmtree(c.directory(tmp_path) / "checkpoint", ignore_errors=True)
     write_report(tmp_path, reps=20, plots=False, videos=True)
     assert gif.read_bytes() == before
+
+    # the report marks a caption the results have moved past: a better cell finished since, or the cell named
+    # was trained again (its label carries its final score)
+    rest = captions["toy-reach-v0"].split(";", 1)[1]
+    other = 1 - best
+    moved = {
+        f"BC seed {other} (final score {finals[other]:.3f})": f"the task's best cell is now BC seed {best} (final",
+        f"BC seed {best} (final score 9.999)": "made from an earlier training of this cell, not its current result",
+    }
+    for label, note in moved.items():
+        (videos / "captions.json").write_text(json.dumps({"toy-reach-v0": f"{label};{rest}"}))
+        report = write_report(tmp_path, reps=20, plots=False).read_text()
+        assert f"**toy-reach-v0**: {label};{rest} (**{note}" in report
+    (videos / "captions.json").write_text(json.dumps(captions))
+    report = write_report(tmp_path, reps=20, plots=False).read_text()
+    assert f"**toy-reach-v0**: {captions['toy-reach-v0']}\n" in report
