@@ -108,7 +108,7 @@ def write_rollout_gifs(results, out_dir: Path, log=print) -> dict[str, str]:
         shown = captions.get(task) if (videos / f"{task}.gif").exists() else None
         for cell in ranked_cells(results, task):
             here = RunDir(cell.directory).checkpoint.exists()
-            if shown is not None and shown.startswith(_cell_label(cell) + ";"):
+            if shown is not None and _names(shown, cell):
                 if shown.startswith(_cell_label(cell) + EPISODE) or not here:
                     break  # the GIF already shows this cell, better than any whose checkpoint is here: keep it
                 # else made by an earlier d5rl's GIF code (episodes of its own, one at a time): made again
@@ -130,15 +130,20 @@ def caption_note(results, task: str, caption: str) -> str:
     """What a GIF's caption no longer says truly, given the grid's results now (empty when it holds): the cell
     it names was trained again or went stale since (its label, with its final score, matches no current
     cell), or a better cell has finished since, on a machine other than the one that made the GIF."""
-    labels = [_cell_label(c) for c in ranked_cells(results, task)]
-    if labels and caption.startswith(labels[0] + ";"):
+    ranked = ranked_cells(results, task)
+    if ranked and _names(caption, ranked[0]):
         return ""
-    if any(caption.startswith(label + ";") for label in labels):
-        return f"the task's best cell is now {labels[0]}; `d5rl report --videos` where its checkpoint is films it"
+    if any(_names(caption, cell) for cell in ranked):
+        return f"the task's best cell is now {_cell_label(ranked[0])}; `d5rl report --videos` where its checkpoint is films it"
     return (
         "made from an earlier training of this cell, not its current result; `d5rl report --videos` where "
         "the task's best cell's checkpoint is films it again"
     )
+
+
+def _names(caption: str, cell) -> bool:
+    """Whether a GIF's caption names ``cell`` as it is now (its label, final score included, then ``;``)."""
+    return caption.startswith(_cell_label(cell) + ";")
 
 
 def _cell_label(cell) -> str:
