@@ -134,10 +134,13 @@ def caption_note(results, task: str, caption: str) -> str:
     if ranked and _names(caption, ranked[0]):
         return ""
     if any(_names(caption, cell) for cell in ranked):
-        return f"the task's best cell is now {_cell_label(ranked[0])}; `d5rl report --videos` where its checkpoint is films it"
+        return (
+            f"the task's best cell is now {_cell_label(ranked[0])}; to film it, run `d5rl report --videos` "
+            "where its checkpoint is"
+        )
     return (
-        "made from an earlier training of this cell, not its current result; `d5rl report --videos` where "
-        "the task's best cell's checkpoint is films it again"
+        "made from an earlier training of this cell, not its current result; to film the task's best cell, "
+        "run `d5rl report --videos` where its checkpoint is"
     )
 
 
