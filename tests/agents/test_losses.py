@@ -225,11 +225,14 @@ def test_idql_takes_two_actor_steps_per_critic_step():
         g, _ = jax.grad(agent.actor_loss, has_aux=True)(actor.params, part, key)
         actor = actor.apply_gradients(grads=g)
         ema = soft_update(ema, actor.params, agent.config.actor_ema)
+    # The jitted update and these eager gradients round differently in the last bits, and Adam's first step
+    # (g / (|g| + eps)) magnifies that where a gradient is near eps: up to 8e-6 seen on an AMD EPYC. A wrong
+    # schedule (one step on the whole batch, the whole batch twice, the halves' keys swapped) is >= 9e-4 away.
     for got, want in zip(
         jax.tree_util.tree_leaves((new.actor.params, new.target_actor_params)),
         jax.tree_util.tree_leaves((actor.params, ema)),
     ):
-        np.testing.assert_allclose(np.asarray(got), np.asarray(want), rtol=1e-5, atol=1e-7)
+        np.testing.assert_allclose(np.asarray(got), np.asarray(want), rtol=0, atol=5e-5)
     assert int(new.actor.step) == 2 and int(new.critic.step) == 1
 
 
